@@ -1,13 +1,59 @@
-//! Landing-site geometry: the paper's Polylidar pipeline and polylabel, with no I/O, async or
-//! protobuf. (Skeleton: the contract other crates build against; modules fill it in.)
+//! Landing-site geometry: the paper's Polylidar pipeline and polylabel, with no I/O, async,
+//! logging configuration or protobuf.
+//!
+//! Given a point cloud (x, y, z with z up) and, optionally, one semantic class per point, [`detect`]
+//! finds the flat, obstacle-free places and returns them as polygons with holes, each with the point
+//! farthest from every edge and obstacle and that distance (the *safe radius*), best first:
+//!
+//! 1. [`triangulation`]: 2-D Delaunay triangulation of the points' x/y (exact predicates);
+//! 2. [`filter`]: the paper's Algorithm 1 (edge length, normal, height bypass, classes);
+//! 3. [`regions`]: the paper's Algorithm 2, region growing over triangle adjacency;
+//! 4. [`boundary`]: each region's boundary half-edges walked into an OGC-valid polygon with holes;
+//! 5. [`polylabel`]: pole of inaccessibility with its distance, within a requested precision;
+//! 6. [`ranking`]: filters and ordering of the sites by safe radius.
+//!
+//! Main types: [`Params`] (the paper's defaults), [`Detection`] with its [`LandingSite`]s and
+//! [`Polygon`]s, [`GeometryError`]. [`validation`] holds the invariant checks for meshes and polygons
+//! that tests call on every result, and [`synthetic`] seeded scenes for tests and benchmarks.
+//!
+//! ```
+//! use landing_geometry::{detect, synthetic::{Scene, SceneParams}, Params};
+//!
+//! // A 20 m x 20 m flat roof 10 m up, no obstacles, ground and walls around it.
+//! let scene = Scene::generate(&SceneParams { obstacles: 0, ..SceneParams::default() }, 7);
+//! let found = detect(&scene.points, Some(&scene.classes), &Params::default()).unwrap();
+//! let best = &found.sites[0];
+//! assert_eq!(best.rank, 1);
+//! assert!((best.plane_height_m - 10.0).abs() < 0.05);
+//! // The largest circle in a 20 m square has a radius of 10 m; the sampled edge loses a little.
+//! assert!(best.safe_radius_m > 8.5 && best.safe_radius_m <= 10.0);
+//! best.polygon.validate().unwrap();
+//! ```
 
 #![forbid(unsafe_code)]
 
+pub mod boundary;
 pub mod class;
+pub mod delaunay;
+pub mod filter;
+pub mod polylabel;
+pub mod ranking;
+pub mod regions;
+pub mod synthetic;
+pub mod triangulation;
+pub mod validation;
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 pub use class::SemanticClass;
+pub use triangulation::{Triangulation, TriangulationConfig, Triangulator};
+
+/// Largest accepted absolute coordinate, metres. Beyond it f32 input has less than a metre of
+/// resolution and the result would be meaningless.
+pub const MAX_ABS_COORDINATE_M: f64 = 1e7;
+
+/// Smallest accepted polylabel precision, metres: finer precision makes the cell search explode.
+pub const MIN_POLYLABEL_PRECISION_M: f64 = 1e-3;
 
 /// Parameters of the whole pipeline. `Default` gives the paper's values.
 #[derive(Debug, Clone, PartialEq)]
@@ -51,12 +97,94 @@ impl Default for Params {
     }
 }
 
+impl Params {
+    /// Checks every parameter's range. The error names the field as in this struct (`l_max_m`);
+    /// [`Params::option_name`] gives the `landing.v1.PipelineOptions` name of the same knob.
+    pub fn validate(&self) -> Result<(), GeometryError> {
+        fn bad(field: &'static str, value: impl ToString, reason: &'static str) -> GeometryError {
+            GeometryError::InvalidParameter { field, value: value.to_string(), reason }
+        }
+        let finite_positive = |field, v: f64| {
+            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(bad(field, v, "must be finite and > 0")) }
+        };
+        let finite_non_negative = |field, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(bad(field, v, "must be finite and >= 0"))
+            }
+        };
+        finite_positive("l_max_m", self.l_max_m)?;
+        if !(self.l_max_m <= MAX_ABS_COORDINATE_M) {
+            return Err(bad("l_max_m", self.l_max_m, "must be <= 1e7"));
+        }
+        if !(self.dot_min >= 0.0 && self.dot_min < 1.0) {
+            return Err(bad("dot_min", self.dot_min, "must be in [0, 1)"));
+        }
+        finite_non_negative("z_min_m", self.z_min_m)?;
+        if let Some(&c) = self.landable_classes.iter().find(|&&c| SemanticClass::from_u8(c).is_none())
+        {
+            return Err(bad("landable_classes", c, "not a semantic class (0..=14)"));
+        }
+        finite_positive("polylabel_precision_m", self.polylabel_precision_m)?;
+        if self.polylabel_precision_m < MIN_POLYLABEL_PRECISION_M {
+            return Err(bad("polylabel_precision_m", self.polylabel_precision_m, "must be >= 0.001"));
+        }
+        finite_non_negative("min_safe_radius_m", self.min_safe_radius_m)?;
+        finite_non_negative("min_area_m2", self.min_area_m2)?;
+        finite_non_negative("min_hole_area_m2", self.min_hole_area_m2)?;
+        if self.max_sites == 0 {
+            return Err(bad("max_sites", self.max_sites, "must be >= 1"));
+        }
+        Ok(())
+    }
+
+    /// The `landing.v1.PipelineOptions` field that sets the parameter named `field` (as in
+    /// [`GeometryError::InvalidParameter`]), e.g. `"l_max_m"` → `"max_triangle_edge_m"`.
+    pub fn option_name(field: &str) -> Option<&'static str> {
+        Some(match field {
+            "l_max_m" => "max_triangle_edge_m",
+            "dot_min" => "min_normal_dot",
+            "z_min_m" => "max_triangle_height_m",
+            "landable_classes" => "landable_classes",
+            "min_region_triangles" => "min_region_triangles",
+            "polylabel_precision_m" => "polylabel_precision_m",
+            "min_safe_radius_m" => "min_safe_radius_m",
+            "min_area_m2" => "min_area_m2",
+            "min_hole_area_m2" => "min_hole_area_m2",
+            "max_sites" => "max_sites",
+            _ => return None,
+        })
+    }
+}
+
 /// A polygon with holes in the plane of a landing site. Shell counter-clockwise, holes clockwise
 /// (seen from above), rings not closed (last point is not a copy of the first).
+///
+/// Polygons made by [`detect`] are OGC-valid (see [`Polygon::validate`]) and canonical: each ring
+/// starts at its lexicographically smallest (x, y) vertex and holes are sorted.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Polygon {
     pub shell: Vec<[f64; 2]>,
     pub holes: Vec<Vec<[f64; 2]>>,
+}
+
+impl Polygon {
+    /// Area of the shell minus the holes, square metres.
+    pub fn area(&self) -> f64 {
+        validation::ring_signed_area(&self.shell).abs()
+            - self.holes.iter().map(|h| validation::ring_signed_area(h).abs()).sum::<f64>()
+    }
+
+    /// OGC validity: see [`validation::check_polygon`].
+    pub fn validate(&self) -> Result<(), GeometryError> {
+        validation::check_polygon(self)
+    }
+
+    /// Signed distance from `p` to the polygon's boundary: positive inside, negative outside.
+    pub fn signed_distance(&self, p: [f64; 2]) -> f64 {
+        polylabel::signed_distance(self, p)
+    }
 }
 
 /// One ranked landing site.
@@ -87,7 +215,19 @@ pub struct StepTimings {
     pub triangle_filter: Duration,
     pub plane_extraction: Duration,
     pub polygon_extraction: Duration,
+    /// Polylabel and ranking.
     pub polylabel: Duration,
+}
+
+impl StepTimings {
+    /// Sum of all steps.
+    pub fn total(&self) -> Duration {
+        self.triangulation
+            + self.triangle_filter
+            + self.plane_extraction
+            + self.polygon_extraction
+            + self.polylabel
+    }
 }
 
 /// The result of one run of the pipeline.
@@ -95,7 +235,9 @@ pub struct StepTimings {
 pub struct Detection {
     /// Best first.
     pub sites: Vec<LandingSite>,
+    /// Number of input points.
     pub point_count: usize,
+    /// Number of Delaunay triangles.
     pub triangle_count: usize,
     pub timings: StepTimings,
 }
@@ -113,15 +255,85 @@ pub enum GeometryError {
     /// `classes` does not have one entry per point.
     #[error("{classes} classes given for {points} points")]
     ClassCountMismatch { points: usize, classes: usize },
+    /// A bounded loop reached its bound: a bug or pathological input, reported instead of spinning.
+    #[error("{step} gave up after {limit} iterations")]
+    IterationLimit { step: &'static str, limit: usize },
+    /// A triangulation broke one of its invariants (see [`Triangulation::check_invariants`]).
+    #[error("invalid mesh: {reason}")]
+    InvalidMesh { reason: String },
+    /// A polygon is not OGC-valid (see [`Polygon::validate`]).
+    #[error("invalid polygon: {reason}")]
+    InvalidPolygon { reason: String },
 }
 
 /// Runs the whole pipeline on `points` (x, y, z in a frame with z up) and optional per-point
-/// classes (values of [`SemanticClass`], 0 = unknown).
+/// classes (values of [`SemanticClass`], 0 = unknown) with the default triangulator.
+///
+/// Fewer than three distinct points, or points all on one line, give an empty [`Detection`], not an
+/// error: there is simply no surface. Non-finite or out-of-range coordinates (|c| > 1e7 m) give
+/// [`GeometryError::InvalidPoint`]; duplicated x/y positions are triangulated once (first wins).
 pub fn detect(
     points: &[[f32; 3]],
     classes: Option<&[u8]>,
     params: &Params,
 ) -> Result<Detection, GeometryError> {
-    let _ = (points, classes, params);
-    Ok(Detection::default())
+    detect_with(points, classes, params, &TriangulationConfig::default())
+}
+
+/// [`detect`] with a choice of triangulator (for benchmarks and cross-checks).
+pub fn detect_with(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    params: &Params,
+    triangulation: &TriangulationConfig,
+) -> Result<Detection, GeometryError> {
+    params.validate()?;
+    check_points(points, classes)?;
+    let pts: Vec<[f64; 3]> =
+        points.iter().map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]).collect();
+    let mut timings = StepTimings::default();
+
+    let t0 = Instant::now();
+    let tri = triangulation::triangulate(&pts, triangulation)?;
+    let t1 = Instant::now();
+    timings.triangulation = t1 - t0;
+
+    let mask = filter::filter_triangles(&tri, &pts, classes, &filter::FilterParams::from(params));
+    let t2 = Instant::now();
+    timings.triangle_filter = t2 - t1;
+
+    let regions = regions::extract_regions(
+        &tri,
+        mask,
+        &regions::RegionParams { min_triangles: params.min_region_triangles },
+    )?;
+    let t3 = Instant::now();
+    timings.plane_extraction = t3 - t2;
+
+    let polygons = boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams {})?;
+    let t4 = Instant::now();
+    timings.polygon_extraction = t4 - t3;
+
+    let sites = ranking::rank_sites(&tri, &pts, &regions, polygons, &ranking::RankingParams::from(params))?;
+    timings.polylabel = t4.elapsed();
+
+    Ok(Detection { sites, point_count: points.len(), triangle_count: tri.len(), timings })
+}
+
+/// Boundary checks on the input, once: finite, in range, one class per point.
+fn check_points(points: &[[f32; 3]], classes: Option<&[u8]>) -> Result<(), GeometryError> {
+    if let Some(c) = classes
+        && c.len() != points.len()
+    {
+        return Err(GeometryError::ClassCountMismatch { points: points.len(), classes: c.len() });
+    }
+    for (index, p) in points.iter().enumerate() {
+        for &c in p {
+            let v = f64::from(c);
+            if !(v.abs() <= MAX_ABS_COORDINATE_M) {
+                return Err(GeometryError::InvalidPoint { index, value: v });
+            }
+        }
+    }
+    Ok(())
 }

@@ -1,0 +1,541 @@
+//! Builders that turn raw buffers into `landing.v1` frames, and the reverse (unpacking a packed
+//! cloud) for tools that draw or compare frames.
+
+use landing_proto::v1::{
+    CameraCalibration, CameraImage, CompressedImage, Frame, GeodeticPoint, NumericType,
+    PackedElementField, PointCloud, Pose, Quaternion, RawImage, Vector3, camera_image,
+};
+
+use crate::ClientError;
+
+/// Builds a packed [`PointCloud`] from points and optional per-point classes and intensities.
+///
+/// The layout is `x, y, z` (FLOAT32 at 0, 4, 8), then `intensity` (FLOAT32) if given, then
+/// `class` (UINT8) if given, little-endian.
+#[derive(Debug, Clone, Default)]
+pub struct PointCloudBuilder<'a> {
+    points: &'a [[f32; 3]],
+    classes: Option<&'a [u8]>,
+    intensities: Option<&'a [f32]>,
+    pose: Option<Pose>,
+    frame_id: String,
+    timestamp: Option<prost_types::Timestamp>,
+}
+
+impl<'a> PointCloudBuilder<'a> {
+    /// Starts a cloud of `points` (in the LiDAR frame, or in the world when no pose is set).
+    pub fn new(points: &'a [[f32; 3]]) -> Self {
+        Self { points, ..Default::default() }
+    }
+
+    /// Per-point classes (values of `SemanticClass`, 0 = unknown); one per point.
+    pub fn classes(mut self, classes: &'a [u8]) -> Self {
+        self.classes = Some(classes);
+        self
+    }
+
+    /// Per-point intensities; one per point.
+    pub fn intensities(mut self, intensities: &'a [f32]) -> Self {
+        self.intensities = Some(intensities);
+        self
+    }
+
+    /// `T_world_lidar`. Without it the points are taken as world coordinates.
+    pub fn pose(mut self, pose: Pose) -> Self {
+        self.pose = Some(pose);
+        self
+    }
+
+    /// Name of the sensor frame.
+    pub fn frame_id(mut self, frame_id: impl Into<String>) -> Self {
+        self.frame_id = frame_id.into();
+        self
+    }
+
+    /// Time of the scan.
+    pub fn timestamp(mut self, timestamp: prost_types::Timestamp) -> Self {
+        self.timestamp = Some(timestamp);
+        self
+    }
+
+    /// Packs the cloud. Fails when classes or intensities do not have one entry per point.
+    pub fn build(self) -> Result<PointCloud, ClientError> {
+        let n = self.points.len();
+        if let Some(c) = self.classes
+            && c.len() != n
+        {
+            return Err(ClientError::InvalidInput {
+                field: "classes",
+                reason: format!("{} classes for {n} points", c.len()),
+            });
+        }
+        if let Some(i) = self.intensities
+            && i.len() != n
+        {
+            return Err(ClientError::InvalidInput {
+                field: "intensities",
+                reason: format!("{} intensities for {n} points", i.len()),
+            });
+        }
+        let mut fields = vec![
+            field("x", 0, NumericType::Float32),
+            field("y", 4, NumericType::Float32),
+            field("z", 8, NumericType::Float32),
+        ];
+        let mut stride = 12u32;
+        if self.intensities.is_some() {
+            fields.push(field("intensity", stride, NumericType::Float32));
+            stride += 4;
+        }
+        if self.classes.is_some() {
+            fields.push(field("class", stride, NumericType::Uint8));
+            stride += 1;
+        }
+        let mut data = Vec::with_capacity(n * stride as usize);
+        for (i, p) in self.points.iter().enumerate() {
+            for c in p {
+                data.extend_from_slice(&c.to_le_bytes());
+            }
+            if let Some(int) = self.intensities {
+                data.extend_from_slice(&int[i].to_le_bytes());
+            }
+            if let Some(cls) = self.classes {
+                data.push(cls[i]);
+            }
+        }
+        Ok(PointCloud {
+            timestamp: self.timestamp,
+            frame_id: self.frame_id,
+            pose: self.pose,
+            point_stride: stride,
+            fields,
+            data,
+        })
+    }
+}
+
+fn field(name: &str, offset: u32, ty: NumericType) -> PackedElementField {
+    PackedElementField { name: name.to_owned(), offset, r#type: ty as i32 }
+}
+
+/// A point cloud unpacked from its wire form.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct UnpackedCloud {
+    /// Points in the cloud's own frame (apply [`UnpackedCloud::to_world`] for world coordinates).
+    pub points: Vec<[f32; 3]>,
+    /// Per-point classes, when the cloud has a `class` field.
+    pub classes: Option<Vec<u8>>,
+    /// Per-point intensities, when the cloud has an `intensity` field.
+    pub intensities: Option<Vec<f32>>,
+}
+
+impl UnpackedCloud {
+    /// The points moved to the world by `pose` (`T_world_lidar`; `None` = identity).
+    pub fn to_world(&self, pose: Option<&Pose>) -> Vec<[f64; 3]> {
+        let t = pose.map(RigidTransform::from_pose).unwrap_or_default();
+        self.points
+            .iter()
+            .map(|p| t.apply([p[0] as f64, p[1] as f64, p[2] as f64]))
+            .collect()
+    }
+}
+
+/// Unpacks a packed cloud (FLOAT32 or FLOAT64 xyz, optional FLOAT32 intensity and UINT8 class).
+pub fn unpack_point_cloud(cloud: &PointCloud) -> Result<UnpackedCloud, ClientError> {
+    let stride = cloud.point_stride as usize;
+    if stride == 0 {
+        return Err(ClientError::InvalidInput {
+            field: "point_cloud.point_stride",
+            reason: "must be > 0".into(),
+        });
+    }
+    if cloud.data.len() % stride != 0 {
+        return Err(ClientError::InvalidInput {
+            field: "point_cloud.data",
+            reason: format!("{} bytes is not a multiple of the stride {stride}", cloud.data.len()),
+        });
+    }
+    let find = |name: &str| cloud.fields.iter().find(|f| f.name == name);
+    let read = |f: &PackedElementField, point: &[u8]| -> Option<f64> {
+        let o = f.offset as usize;
+        let ty = NumericType::try_from(f.r#type).ok()?;
+        let bytes = |n: usize| point.get(o..o + n);
+        Some(match ty {
+            NumericType::Float32 => f32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
+            NumericType::Float64 => f64::from_le_bytes(bytes(8)?.try_into().ok()?),
+            NumericType::Uint8 => *bytes(1)?.first()? as f64,
+            NumericType::Int8 => *bytes(1)?.first()? as i8 as f64,
+            NumericType::Uint16 => u16::from_le_bytes(bytes(2)?.try_into().ok()?) as f64,
+            NumericType::Int16 => i16::from_le_bytes(bytes(2)?.try_into().ok()?) as f64,
+            NumericType::Uint32 => u32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
+            NumericType::Int32 => i32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
+            NumericType::Unspecified => return None,
+        })
+    };
+    let mut xyz = Vec::with_capacity(3);
+    for name in ["x", "y", "z"] {
+        xyz.push(find(name).ok_or(ClientError::InvalidInput {
+            field: "point_cloud.fields",
+            reason: format!("no `{name}` field"),
+        })?);
+    }
+    let intensity = find("intensity");
+    let class = find("class");
+    let n = cloud.data.len() / stride;
+    let mut out = UnpackedCloud {
+        points: Vec::with_capacity(n),
+        classes: class.map(|_| Vec::with_capacity(n)),
+        intensities: intensity.map(|_| Vec::with_capacity(n)),
+    };
+    let bad = |name: &str| ClientError::InvalidInput {
+        field: "point_cloud.fields",
+        reason: format!("field `{name}` does not fit in the stride or has an unknown type"),
+    };
+    for point in cloud.data.chunks_exact(stride) {
+        let mut p = [0f32; 3];
+        for (k, f) in xyz.iter().enumerate() {
+            p[k] = read(f, point).ok_or_else(|| bad(&f.name))? as f32;
+        }
+        out.points.push(p);
+        if let (Some(f), Some(v)) = (intensity, out.intensities.as_mut()) {
+            v.push(read(f, point).ok_or_else(|| bad("intensity"))? as f32);
+        }
+        if let (Some(f), Some(v)) = (class, out.classes.as_mut()) {
+            v.push(read(f, point).ok_or_else(|| bad("class"))? as u8);
+        }
+    }
+    Ok(out)
+}
+
+/// A pose from a position and a unit quaternion `[x, y, z, w]`.
+pub fn pose(position: [f64; 3], orientation_xyzw: [f64; 4]) -> Pose {
+    let [x, y, z, w] = orientation_xyzw;
+    Pose {
+        position: Some(Vector3 { x: position[0], y: position[1], z: position[2] }),
+        orientation: Some(Quaternion { x, y, z, w }),
+    }
+}
+
+/// The identity pose.
+pub fn identity_pose() -> Pose {
+    pose([0.0; 3], [0.0, 0.0, 0.0, 1.0])
+}
+
+/// Pinhole intrinsics.
+pub fn intrinsics(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> CameraCalibration {
+    CameraCalibration { width, height, fx, fy, cx, cy }
+}
+
+/// Pinhole intrinsics of an ideal camera with square pixels, the principal point at the image
+/// centre, and the given horizontal field of view.
+pub fn intrinsics_from_fov(width: u32, height: u32, horizontal_fov_deg: f64) -> CameraCalibration {
+    let f = width as f64 / 2.0 / (horizontal_fov_deg.to_radians() / 2.0).tan();
+    intrinsics(width, height, f, f, width as f64 / 2.0, height as f64 / 2.0)
+}
+
+/// The pixels of a camera image, before they are tied to a pose and intrinsics.
+#[derive(Debug, Clone)]
+pub enum ImageData {
+    /// An encoded PNG file.
+    Png(Vec<u8>),
+    /// An encoded JPEG file.
+    Jpeg(Vec<u8>),
+    /// Raw 8-bit RGB, row-major, tightly packed (`width * 3` bytes per row).
+    Rgb8 { width: u32, height: u32, data: Vec<u8> },
+}
+
+/// Ties pixels to the camera's pose and intrinsics. The image size is checked against the
+/// intrinsics (encoded images are probed from their headers, not decoded).
+pub fn camera_image(
+    pixels: ImageData,
+    pose: Pose,
+    calibration: CameraCalibration,
+) -> Result<CameraImage, ClientError> {
+    let (size, image) = match pixels {
+        ImageData::Png(data) => (
+            probe_size(&data, image::ImageFormat::Png)?,
+            camera_image::Image::Compressed(CompressedImage { data, format: "png".into() }),
+        ),
+        ImageData::Jpeg(data) => (
+            probe_size(&data, image::ImageFormat::Jpeg)?,
+            camera_image::Image::Compressed(CompressedImage { data, format: "jpeg".into() }),
+        ),
+        ImageData::Rgb8 { width, height, data } => {
+            let expected = width as usize * height as usize * 3;
+            if data.len() != expected {
+                return Err(ClientError::InvalidInput {
+                    field: "image.data",
+                    reason: format!("{} bytes for a {width}x{height} RGB8 image (expected {expected})", data.len()),
+                });
+            }
+            (
+                (width, height),
+                camera_image::Image::Raw(RawImage {
+                    width,
+                    height,
+                    encoding: "rgb8".into(),
+                    step: width * 3,
+                    data,
+                }),
+            )
+        }
+    };
+    if size != (calibration.width, calibration.height) {
+        return Err(ClientError::InvalidInput {
+            field: "calibration",
+            reason: format!(
+                "intrinsics are for {}x{} but the image is {}x{}",
+                calibration.width, calibration.height, size.0, size.1
+            ),
+        });
+    }
+    Ok(CameraImage {
+        timestamp: None,
+        frame_id: "camera".into(),
+        pose: Some(pose),
+        calibration: Some(calibration),
+        image: Some(image),
+    })
+}
+
+fn probe_size(data: &[u8], format: image::ImageFormat) -> Result<(u32, u32), ClientError> {
+    image::ImageReader::with_format(std::io::Cursor::new(data), format)
+        .into_dimensions()
+        .map_err(|e| ClientError::Image { what: format!("{format:?}"), reason: e.to_string() })
+}
+
+/// Builds a [`Frame`] around a cloud.
+#[derive(Debug, Clone, Default)]
+pub struct FrameBuilder {
+    frame: Frame,
+}
+
+impl FrameBuilder {
+    /// A frame with this sequence number and LiDAR scan.
+    pub fn new(sequence: u64, point_cloud: PointCloud) -> Self {
+        Self { frame: Frame { sequence, point_cloud: Some(point_cloud), ..Default::default() } }
+    }
+
+    /// The drone that took the frame.
+    pub fn drone_id(mut self, drone_id: impl Into<String>) -> Self {
+        self.frame.drone_id = drone_id.into();
+        self
+    }
+
+    /// The camera image used to classify the points.
+    pub fn image(mut self, image: CameraImage) -> Self {
+        self.frame.image = Some(image);
+        self
+    }
+
+    /// Capture time.
+    pub fn timestamp(mut self, timestamp: prost_types::Timestamp) -> Self {
+        self.frame.timestamp = Some(timestamp);
+        self
+    }
+
+    /// WGS-84 position of the world origin, so sites also carry latitude/longitude.
+    pub fn geodetic_origin(mut self, latitude_deg: f64, longitude_deg: f64, altitude_m: f64) -> Self {
+        self.frame.geodetic_origin = Some(GeodeticPoint { latitude_deg, longitude_deg, altitude_m });
+        self
+    }
+
+    /// The finished frame.
+    pub fn build(self) -> Frame {
+        self.frame
+    }
+}
+
+/// A rigid transform (rotation as a unit quaternion, then translation).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigidTransform {
+    /// Unit quaternion `[x, y, z, w]`.
+    pub rotation: [f64; 4],
+    /// Translation.
+    pub translation: [f64; 3],
+}
+
+impl Default for RigidTransform {
+    fn default() -> Self {
+        Self { rotation: [0.0, 0.0, 0.0, 1.0], translation: [0.0; 3] }
+    }
+}
+
+impl RigidTransform {
+    /// From a proto pose; a missing or zero quaternion is taken as identity.
+    pub fn from_pose(pose: &Pose) -> Self {
+        let t = pose.position.as_ref().map(|p| [p.x, p.y, p.z]).unwrap_or([0.0; 3]);
+        let q = pose.orientation.as_ref().map(|q| [q.x, q.y, q.z, q.w]).unwrap_or([0.0, 0.0, 0.0, 1.0]);
+        let n = q.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let rotation = if n > 0.0 && n.is_finite() {
+            [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
+        } else {
+            [0.0, 0.0, 0.0, 1.0]
+        };
+        Self { rotation, translation: t }
+    }
+
+    /// Rotates a vector (no translation).
+    pub fn rotate(&self, v: [f64; 3]) -> [f64; 3] {
+        let [qx, qy, qz, qw] = self.rotation;
+        // v' = v + 2w(q×v) + 2 q×(q×v)
+        let c1 = cross([qx, qy, qz], v);
+        let c2 = cross([qx, qy, qz], c1);
+        [
+            v[0] + 2.0 * (qw * c1[0] + c2[0]),
+            v[1] + 2.0 * (qw * c1[1] + c2[1]),
+            v[2] + 2.0 * (qw * c1[2] + c2[2]),
+        ]
+    }
+
+    /// Maps a point from the child frame to the parent frame.
+    pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
+        let r = self.rotate(p);
+        [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
+    }
+
+    /// The inverse transform.
+    pub fn inverse(&self) -> Self {
+        let [x, y, z, w] = self.rotation;
+        let inv = Self { rotation: [-x, -y, -z, w], translation: [0.0; 3] };
+        let t = inv.rotate(self.translation);
+        Self { rotation: inv.rotation, translation: [-t[0], -t[1], -t[2]] }
+    }
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn packs_xyz_intensity_class_little_endian() {
+        let pts = [[1.0f32, 2.0, 3.0], [-1.5, 0.0, 7.25]];
+        let cloud = PointCloudBuilder::new(&pts)
+            .intensities(&[0.5, 0.25])
+            .classes(&[4, 13])
+            .build()
+            .unwrap();
+        assert_eq!(cloud.point_stride, 17);
+        assert_eq!(cloud.data.len(), 34);
+        assert_eq!(&cloud.data[0..4], &1.0f32.to_le_bytes());
+        assert_eq!(&cloud.data[12..16], &0.5f32.to_le_bytes());
+        assert_eq!(cloud.data[16], 4);
+        assert_eq!(cloud.data[33], 13);
+        let names: Vec<_> = cloud.fields.iter().map(|f| f.name.as_str()).collect();
+        assert_eq!(names, ["x", "y", "z", "intensity", "class"]);
+    }
+
+    #[test]
+    fn rejects_class_count_mismatch_naming_the_field() {
+        let pts = [[0.0f32; 3]; 3];
+        let err = PointCloudBuilder::new(&pts).classes(&[1, 2]).build().unwrap_err();
+        assert!(err.to_string().contains("`classes`"), "{err}");
+        assert!(err.to_string().contains("2 classes for 3 points"), "{err}");
+    }
+
+    #[test]
+    fn unpacks_float64_clouds() {
+        let mut data = Vec::new();
+        for v in [1.0f64, 2.0, 3.0] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        let cloud = PointCloud {
+            point_stride: 24,
+            fields: vec![
+                field("x", 0, NumericType::Float64),
+                field("y", 8, NumericType::Float64),
+                field("z", 16, NumericType::Float64),
+            ],
+            data,
+            ..Default::default()
+        };
+        let u = unpack_point_cloud(&cloud).unwrap();
+        assert_eq!(u.points, vec![[1.0, 2.0, 3.0]]);
+        assert_eq!(u.classes, None);
+    }
+
+    #[test]
+    fn raw_image_size_must_match_data_and_intrinsics() {
+        let calib = intrinsics_from_fov(4, 2, 90.0);
+        assert!((calib.fx - 2.0).abs() < 1e-9);
+        let ok = camera_image(
+            ImageData::Rgb8 { width: 4, height: 2, data: vec![0; 24] },
+            identity_pose(),
+            calib,
+        );
+        assert!(ok.is_ok());
+        let short = camera_image(
+            ImageData::Rgb8 { width: 4, height: 2, data: vec![0; 23] },
+            identity_pose(),
+            calib,
+        );
+        assert!(short.unwrap_err().to_string().contains("image.data"));
+        let other = camera_image(
+            ImageData::Rgb8 { width: 2, height: 4, data: vec![0; 24] },
+            identity_pose(),
+            calib,
+        );
+        assert!(other.unwrap_err().to_string().contains("intrinsics are for 4x2"));
+    }
+
+    #[test]
+    fn png_size_is_probed_from_the_header() {
+        let img = image::RgbImage::new(5, 3);
+        let mut png = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
+        let calib = intrinsics(5, 3, 10.0, 10.0, 2.5, 1.5);
+        let cam = camera_image(ImageData::Png(png.clone()), identity_pose(), calib).unwrap();
+        assert!(matches!(cam.image, Some(camera_image::Image::Compressed(ref c)) if c.format == "png"));
+        let wrong = intrinsics(6, 3, 10.0, 10.0, 2.5, 1.5);
+        assert!(camera_image(ImageData::Png(png), identity_pose(), wrong).is_err());
+        assert!(camera_image(ImageData::Jpeg(vec![1, 2, 3]), identity_pose(), calib).is_err());
+    }
+
+    #[test]
+    fn quarter_turn_about_z_maps_x_to_y() {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let t = RigidTransform::from_pose(&pose([1.0, 0.0, 0.0], [0.0, 0.0, h, h]));
+        let p = t.apply([1.0, 0.0, 0.0]);
+        assert!((p[0] - 1.0).abs() < 1e-12 && (p[1] - 1.0).abs() < 1e-12 && p[2].abs() < 1e-12);
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, rng_seed: proptest::test_runner::RngSeed::Fixed(7), ..ProptestConfig::default() })]
+
+        #[test]
+        fn pack_then_unpack_is_identity(
+            pts in prop::collection::vec(prop::array::uniform3(-1.0e4f32..1.0e4), 0..50),
+            with_classes in any::<bool>(),
+        ) {
+            let classes: Vec<u8> = (0..pts.len()).map(|i| (i % 15) as u8).collect();
+            let intens: Vec<f32> = (0..pts.len()).map(|i| i as f32 * 0.5).collect();
+            let mut b = PointCloudBuilder::new(&pts).intensities(&intens);
+            if with_classes {
+                b = b.classes(&classes);
+            }
+            let u = unpack_point_cloud(&b.build().unwrap()).unwrap();
+            prop_assert_eq!(&u.points, &pts);
+            prop_assert_eq!(u.intensities.as_deref(), Some(&intens[..]));
+            prop_assert_eq!(u.classes.is_some(), with_classes);
+        }
+
+        #[test]
+        fn transform_then_inverse_is_identity(
+            q in prop::array::uniform4(-1.0f64..1.0),
+            t in prop::array::uniform3(-100.0f64..100.0),
+            p in prop::array::uniform3(-100.0f64..100.0),
+        ) {
+            prop_assume!(q.iter().map(|c| c * c).sum::<f64>() > 0.01);
+            let tf = RigidTransform::from_pose(&pose(t, q));
+            let back = tf.inverse().apply(tf.apply(p));
+            for k in 0..3 {
+                prop_assert!((back[k] - p[k]).abs() < 1e-9);
+            }
+        }
+    }
+}

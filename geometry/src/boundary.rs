@@ -1,0 +1,235 @@
+//! Mesh to polygon: each region's boundary half-edges walked into closed rings.
+//!
+//! Entry point: [`region_polygons`]. A half-edge of a region is on its boundary when its opposite is
+//! missing (convex hull) or lies in another triangle that is not in the region. Triangles are
+//! counter-clockwise, so the region is on the left of every boundary half-edge, and following them
+//! head to tail gives rings: the outer one counter-clockwise (the shell), the others clockwise
+//! (holes).
+//!
+//! At a *pinch* vertex, where several boundary loops meet, the walk takes the outgoing boundary
+//! edge met first when turning counter-clockwise from the incoming edge, i.e. the sharpest right
+//! turn, through the outside. That traces the boundary of each connected piece of the outside
+//! separately, so every ring stays simple: a hole touching the shell, or two holes touching, become
+//! rings that touch at one vertex (valid in OGC) instead of one ring that visits the vertex twice.
+//! The angular order comes from exact `orient2d` signs, never from `atan2`.
+
+use crate::triangulation::{EMPTY, Triangulation, coord, next_halfedge};
+use crate::{GeometryError, Polygon, regions::Regions};
+
+/// Parameters of [`region_polygons`]. There are no knobs yet; the struct keeps the entry point's
+/// shape stable.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct BoundaryParams {}
+
+/// One polygon per region of `regions`, in the same order.
+///
+/// Rings are canonical: each starts at its lexicographically smallest (x, y) vertex, holes are
+/// sorted by their vertices. Every loop is bounded by the number of boundary edges.
+pub fn region_polygons(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    regions: &Regions,
+    _params: &BoundaryParams,
+) -> Result<Vec<Polygon>, GeometryError> {
+    let mut scratch = Scratch { head: vec![EMPTY; points.len()], ..Scratch::default() };
+    regions
+        .regions
+        .iter()
+        .enumerate()
+        .map(|(r, region)| {
+            region_polygon(tri, points, &regions.labels, r as u32, &region.triangles, &mut scratch)
+        })
+        .collect()
+}
+
+/// Buffers reused across regions.
+#[derive(Default)]
+struct Scratch {
+    /// Per point: index (into `edges`) of the first outgoing boundary edge, or `EMPTY`.
+    head: Vec<u32>,
+    /// Per boundary edge: the next outgoing boundary edge from the same point, or `EMPTY`.
+    chain: Vec<u32>,
+    /// Boundary half-edges of the current region, ascending.
+    edges: Vec<u32>,
+    used: Vec<bool>,
+}
+
+fn region_polygon(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    labels: &[u32],
+    label: u32,
+    triangles: &[u32],
+    s: &mut Scratch,
+) -> Result<Polygon, GeometryError> {
+    s.edges.clear();
+    for &t in triangles {
+        for e in 3 * t as usize..3 * t as usize + 3 {
+            let o = tri.halfedges[e];
+            if o == EMPTY || labels[o as usize / 3] != label {
+                s.edges.push(e as u32);
+            }
+        }
+    }
+    s.edges.sort_unstable();
+    let m = s.edges.len();
+    s.chain.clear();
+    s.chain.resize(m, EMPTY);
+    s.used.clear();
+    s.used.resize(m, false);
+    // Build the per-point lists in reverse so each list is in ascending edge order.
+    for i in (0..m).rev() {
+        let v = tri.triangles[s.edges[i] as usize] as usize;
+        s.chain[i] = s.head[v];
+        s.head[v] = i as u32;
+    }
+    let result = trace_rings(tri, points, s);
+    for &e in &s.edges {
+        s.head[tri.triangles[e as usize] as usize] = EMPTY;
+    }
+    let rings = result?;
+
+    let mut shell = None;
+    let mut holes = Vec::new();
+    for ring in rings {
+        if ring_is_ccw(&ring) {
+            if shell.is_some() {
+                return Err(GeometryError::InvalidMesh {
+                    reason: format!("region {label} has two counter-clockwise boundary rings"),
+                });
+            }
+            shell = Some(ring);
+        } else {
+            holes.push(ring);
+        }
+    }
+    let shell = shell.ok_or_else(|| GeometryError::InvalidMesh {
+        reason: format!("region {label} has no counter-clockwise boundary ring"),
+    })?;
+    holes.sort_by(|a, b| {
+        a.iter()
+            .flatten()
+            .zip(b.iter().flatten())
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
+            .unwrap_or(a.len().cmp(&b.len()))
+    });
+    Ok(Polygon { shell, holes })
+}
+
+/// Follows the boundary edges in `s.edges` into rings of coordinates, each rotated to start at its
+/// smallest vertex.
+fn trace_rings(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    s: &mut Scratch,
+) -> Result<Vec<Vec<[f64; 2]>>, GeometryError> {
+    let m = s.edges.len();
+    let xy = |v: u32| {
+        let p = points[v as usize];
+        [p[0], p[1]]
+    };
+    let mut rings = Vec::new();
+    let mut steps = 0usize;
+    for start in 0..m {
+        if s.used[start] {
+            continue;
+        }
+        let mut ring = Vec::new();
+        let mut cur = start;
+        loop {
+            steps += 1;
+            if steps > m {
+                return Err(GeometryError::IterationLimit { step: "boundary walk", limit: m });
+            }
+            s.used[cur] = true;
+            let e = s.edges[cur] as usize;
+            let a = tri.triangles[e];
+            let b = tri.triangles[next_halfedge(e)];
+            ring.push(xy(a));
+            // Candidates: the unused outgoing boundary edges at b, and the ring's first edge.
+            let mut best = EMPTY;
+            let mut c = s.head[b as usize];
+            let mut guard = 0usize;
+            while c != EMPTY {
+                guard += 1;
+                if guard > m {
+                    return Err(GeometryError::IterationLimit { step: "pinch vertex", limit: m });
+                }
+                let ci = c as usize;
+                if !s.used[ci] || ci == start {
+                    if best == EMPTY {
+                        best = c;
+                    } else {
+                        let pa = xy(a);
+                        let pb = xy(b);
+                        let x = xy(tri.triangles[next_halfedge(s.edges[best as usize] as usize)]);
+                        let y = xy(tri.triangles[next_halfedge(s.edges[ci] as usize)]);
+                        if ccw_before(pb, pa, y, x) {
+                            best = c;
+                        }
+                    }
+                }
+                c = s.chain[ci];
+            }
+            if best == EMPTY {
+                return Err(GeometryError::InvalidMesh {
+                    reason: format!("boundary walk stuck at point {b}"),
+                });
+            }
+            if best as usize == start {
+                break;
+            }
+            cur = best as usize;
+        }
+        let min = (0..ring.len())
+            .min_by(|&i, &j| lex(ring[i], ring[j]))
+            .unwrap_or(0);
+        ring.rotate_left(min);
+        rings.push(ring);
+    }
+    Ok(rings)
+}
+
+/// Lexicographic order of points.
+pub(crate) fn lex(a: [f64; 2], b: [f64; 2]) -> std::cmp::Ordering {
+    a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1]))
+}
+
+/// True when, turning counter-clockwise around `o` from the ray towards `r`, direction `x` comes
+/// strictly before direction `y`. Angles are taken in (0, 2π]; exact.
+fn ccw_before(o: [f64; 2], r: [f64; 2], x: [f64; 2], y: [f64; 2]) -> bool {
+    let half = |p: [f64; 2]| {
+        let s = robust::orient2d(coord(o), coord(r), coord(p));
+        if s > 0.0 {
+            0
+        } else if s < 0.0 {
+            1
+        } else {
+            // On the line: straight back (angle π) ends the first half, along the ray (angle 2π)
+            // ends the second.
+            let along = (p[0] - o[0]) * (r[0] - o[0]) + (p[1] - o[1]) * (r[1] - o[1]) > 0.0;
+            if along { 2 } else { 0 }
+        }
+    };
+    let (hx, hy) = (half(x), half(y));
+    if hx != hy {
+        return hx < hy;
+    }
+    if hx == 2 {
+        return false;
+    }
+    robust::orient2d(coord(o), coord(x), coord(y)) > 0.0
+}
+
+/// Orientation of a simple ring, exact: the turn at its lexicographically smallest vertex.
+pub(crate) fn ring_is_ccw(ring: &[[f64; 2]]) -> bool {
+    let n = ring.len();
+    if n < 3 {
+        return false;
+    }
+    let i = (0..n).min_by(|&i, &j| lex(ring[i], ring[j])).unwrap_or(0);
+    let prev = ring[(i + n - 1) % n];
+    let next = ring[(i + 1) % n];
+    robust::orient2d(coord(prev), coord(ring[i]), coord(next)) > 0.0
+}

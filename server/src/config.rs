@@ -1,0 +1,478 @@
+//! The server configuration: built-in defaults ← TOML file ← `LANDING__SECTION__KEY` environment
+//! variables ← command-line flags. Unknown keys are errors naming the key; [`Config::validate`]
+//! runs before anything binds.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::Error;
+
+/// The whole configuration, mirroring the TOML file section by section.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    pub server: ServerConfig,
+    pub pipeline: PipelineConfig,
+    pub segmentation: SegmentationConfig,
+    pub auth: AuthConfig,
+    pub tls: TlsConfig,
+    pub log: LogConfig,
+}
+
+/// `[server]`: listeners and limits.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ServerConfig {
+    /// gRPC listen address.
+    pub listen: String,
+    /// Prometheus `/metrics` listen address; "" disables it.
+    pub metrics_listen: String,
+    /// Largest accepted (and sent) message, bytes.
+    pub max_request_bytes: u64,
+    /// In-flight frames get this long after SIGTERM, seconds.
+    pub shutdown_grace_s: f64,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        Self {
+            listen: "0.0.0.0:50051".into(),
+            metrics_listen: "0.0.0.0:9464".into(),
+            max_request_bytes: 64 * 1024 * 1024,
+            shutdown_grace_s: 20.0,
+        }
+    }
+}
+
+/// `[pipeline]`: worker pool and queues.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PipelineConfig {
+    /// Geometry worker threads; 0 = one per CPU core.
+    pub geometry_workers: u32,
+    /// Frames admitted but not yet finished, all streams together.
+    pub queue_capacity: u32,
+    /// Frames buffered per stream before the overflow policy applies.
+    pub stream_buffer: u32,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        Self { geometry_workers: 0, queue_capacity: 64, stream_buffer: 4 }
+    }
+}
+
+impl PipelineConfig {
+    /// The number of geometry workers, with 0 resolved to the core count.
+    pub fn workers(&self) -> usize {
+        match self.geometry_workers {
+            0 => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            n => n as usize,
+        }
+    }
+}
+
+/// `[segmentation]`: the ONNX model.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SegmentationConfig {
+    pub enabled: bool,
+    pub model_path: PathBuf,
+    /// "cpu" or "cuda" (falls back to CPU with a warning).
+    pub execution_provider: String,
+    pub intra_threads: u32,
+    /// Parallel ONNX Runtime sessions.
+    pub sessions: u32,
+    /// "" = `ORT_DYLIB_PATH`, else `.ort/libonnxruntime.so`.
+    pub ort_library: PathBuf,
+}
+
+impl Default for SegmentationConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            model_path: "models/rooftop-segmentation.onnx".into(),
+            execution_provider: "cpu".into(),
+            intra_threads: 1,
+            sessions: 1,
+            ort_library: PathBuf::new(),
+        }
+    }
+}
+
+/// `[auth]`: bearer tokens.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AuthConfig {
+    /// One bearer token per line; "" = no auth. Health is exempt.
+    pub tokens_file: PathBuf,
+}
+
+/// `[tls]`: server certificate and optional client CA.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TlsConfig {
+    /// PEM certificate chain; all three "" = plaintext.
+    pub cert_path: PathBuf,
+    pub key_path: PathBuf,
+    /// PEM CA; set = client certificates required.
+    pub client_ca_path: PathBuf,
+}
+
+/// `[log]`: tracing output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogConfig {
+    /// "pretty" or "json".
+    pub format: String,
+    /// EnvFilter syntax; `RUST_LOG` overrides.
+    pub filter: String,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        Self { format: "pretty".into(), filter: "info".into() }
+    }
+}
+
+/// Prefix of the environment variables that override config keys.
+pub const ENV_PREFIX: &str = "LANDING__";
+
+impl Config {
+    /// Loads defaults ← `file` ← the `LANDING__SECTION__KEY` variables among `env`, then validates.
+    /// Pass `std::env::vars()` for the process environment.
+    pub fn load(
+        file: Option<&Path>,
+        env: impl IntoIterator<Item = (String, String)>,
+    ) -> Result<Config, Error> {
+        let mut table = defaults_table();
+        if let Some(path) = file {
+            let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+                path: path.display().to_string(),
+                reason: e.to_string(),
+            })?;
+            let parsed: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+                Error::config(format!("(file {})", path.display()), e.to_string().trim().to_owned())
+            })?;
+            merge_file(&mut table, parsed)?;
+        }
+        let mut env: Vec<(String, String)> =
+            env.into_iter().filter(|(k, _)| k.starts_with(ENV_PREFIX)).collect();
+        env.sort();
+        for (name, value) in env {
+            apply_env(&mut table, &name, &value)?;
+        }
+        let config = Config::deserialize(toml::Value::Table(table))
+            .map_err(|e| Error::config("(config)", e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks every key; the error names the first bad one.
+    pub fn validate(&self) -> Result<(), Error> {
+        let s = &self.server;
+        parse_addr("server.listen", &s.listen)?;
+        if !s.metrics_listen.is_empty() {
+            parse_addr("server.metrics_listen", &s.metrics_listen)?;
+        }
+        if !(1024 * 1024..=1024 * 1024 * 1024).contains(&s.max_request_bytes) {
+            return Err(Error::config(
+                "server.max_request_bytes",
+                format!("{} is outside 1 MiB..=1 GiB", s.max_request_bytes),
+            ));
+        }
+        if !(s.shutdown_grace_s.is_finite() && (0.0..=3600.0).contains(&s.shutdown_grace_s)) {
+            return Err(Error::config(
+                "server.shutdown_grace_s",
+                format!("{} is outside 0..=3600 seconds", s.shutdown_grace_s),
+            ));
+        }
+        let p = &self.pipeline;
+        if p.geometry_workers > 1024 {
+            return Err(Error::config("pipeline.geometry_workers", format!("{} is above 1024", p.geometry_workers)));
+        }
+        if !(1..=1_000_000).contains(&p.queue_capacity) {
+            return Err(Error::config("pipeline.queue_capacity", format!("{} is outside 1..=1000000", p.queue_capacity)));
+        }
+        if !(1..=10_000).contains(&p.stream_buffer) {
+            return Err(Error::config("pipeline.stream_buffer", format!("{} is outside 1..=10000", p.stream_buffer)));
+        }
+        let g = &self.segmentation;
+        if !matches!(g.execution_provider.as_str(), "cpu" | "cuda") {
+            return Err(Error::config(
+                "segmentation.execution_provider",
+                format!("{:?} is neither \"cpu\" nor \"cuda\"", g.execution_provider),
+            ));
+        }
+        if !(1..=256).contains(&g.intra_threads) {
+            return Err(Error::config("segmentation.intra_threads", format!("{} is outside 1..=256", g.intra_threads)));
+        }
+        if !(1..=64).contains(&g.sessions) {
+            return Err(Error::config("segmentation.sessions", format!("{} is outside 1..=64", g.sessions)));
+        }
+        if g.enabled {
+            require_file("segmentation.model_path", &g.model_path)?;
+            if !g.ort_library.as_os_str().is_empty() {
+                require_file("segmentation.ort_library", &g.ort_library)?;
+            }
+        }
+        if !self.auth.tokens_file.as_os_str().is_empty() {
+            let tokens = read_tokens(&self.auth.tokens_file)?;
+            if tokens.is_empty() {
+                return Err(Error::config("auth.tokens_file", "the file holds no token"));
+            }
+        }
+        let t = &self.tls;
+        let (cert, key, ca) = (set(&t.cert_path), set(&t.key_path), set(&t.client_ca_path));
+        if cert != key {
+            let missing = if cert { "tls.key_path" } else { "tls.cert_path" };
+            return Err(Error::config(missing, "tls.cert_path and tls.key_path must be set together"));
+        }
+        if ca && !cert {
+            return Err(Error::config("tls.client_ca_path", "client certificates need tls.cert_path and tls.key_path"));
+        }
+        for (key, path) in [("tls.cert_path", &t.cert_path), ("tls.key_path", &t.key_path), ("tls.client_ca_path", &t.client_ca_path)] {
+            if set(path) {
+                require_file(key, path)?;
+            }
+        }
+        if !matches!(self.log.format.as_str(), "pretty" | "json") {
+            return Err(Error::config("log.format", format!("{:?} is neither \"pretty\" nor \"json\"", self.log.format)));
+        }
+        tracing_subscriber::EnvFilter::try_new(&self.log.filter)
+            .map_err(|e| Error::config("log.filter", format!("{:?}: {e}", self.log.filter)))?;
+        Ok(())
+    }
+
+    /// The gRPC listen address (valid after [`Config::validate`]).
+    pub fn listen_addr(&self) -> Result<SocketAddr, Error> {
+        parse_addr("server.listen", &self.server.listen)
+    }
+
+    /// The metrics listen address, `None` when disabled.
+    pub fn metrics_addr(&self) -> Result<Option<SocketAddr>, Error> {
+        if self.server.metrics_listen.is_empty() {
+            return Ok(None);
+        }
+        parse_addr("server.metrics_listen", &self.server.metrics_listen).map(Some)
+    }
+
+    /// The whole config as TOML, as `check-config` prints it.
+    pub fn to_toml(&self) -> String {
+        toml::to_string(self).unwrap_or_else(|e| format!("# cannot render config: {e}\n"))
+    }
+}
+
+/// The bearer tokens of a tokens file: one per line, blank lines and `#` comments ignored.
+pub fn read_tokens(path: &Path) -> Result<Vec<String>, Error> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::config("auth.tokens_file", format!("cannot read {}: {e}", path.display())))?;
+    Ok(text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
+        .map(str::to_owned)
+        .collect())
+}
+
+fn set(path: &Path) -> bool {
+    !path.as_os_str().is_empty()
+}
+
+fn require_file(key: &str, path: &Path) -> Result<(), Error> {
+    if path.is_file() {
+        Ok(())
+    } else {
+        Err(Error::config(key, format!("{} is not a readable file", path.display())))
+    }
+}
+
+fn parse_addr(key: &str, value: &str) -> Result<SocketAddr, Error> {
+    value
+        .parse()
+        .map_err(|_| Error::config(key, format!("{value:?} is not an address like 0.0.0.0:50051")))
+}
+
+fn defaults_table() -> toml::Table {
+    match toml::Value::try_from(Config::default()) {
+        Ok(toml::Value::Table(t)) => t,
+        // Serialising plain structs of strings and numbers cannot fail.
+        _ => toml::Table::new(),
+    }
+}
+
+/// Merges a parsed file into the defaults, rejecting unknown sections/keys and wrong types.
+fn merge_file(table: &mut toml::Table, file: toml::Table) -> Result<(), Error> {
+    for (section, value) in file {
+        let Some(toml::Value::Table(target)) = table.get_mut(&section) else {
+            return Err(Error::config(section, "unknown section"));
+        };
+        let toml::Value::Table(values) = value else {
+            return Err(Error::config(section, "must be a [section] table"));
+        };
+        for (key, value) in values {
+            let path = format!("{section}.{key}");
+            let Some(default) = target.get(&key) else {
+                return Err(Error::config(path, "unknown key"));
+            };
+            let value = coerce(&path, default, value)?;
+            target.insert(key, value);
+        }
+    }
+    Ok(())
+}
+
+/// Applies `LANDING__SECTION__KEY=value`, parsing the value as the key's type.
+fn apply_env(table: &mut toml::Table, name: &str, raw: &str) -> Result<(), Error> {
+    let rest = &name[ENV_PREFIX.len()..];
+    let parts: Vec<String> = rest.split("__").map(str::to_ascii_lowercase).collect();
+    let [section, key] = parts.as_slice() else {
+        return Err(Error::config(name, "expected LANDING__SECTION__KEY"));
+    };
+    let path = format!("{section}.{key}");
+    let Some(toml::Value::Table(target)) = table.get_mut(section) else {
+        return Err(Error::config(format!("{name} ({path})"), "unknown section"));
+    };
+    let Some(default) = target.get(key) else {
+        return Err(Error::config(format!("{name} ({path})"), "unknown key"));
+    };
+    let value = match default {
+        toml::Value::String(_) => toml::Value::String(raw.to_owned()),
+        toml::Value::Integer(_) => toml::Value::Integer(
+            raw.trim().parse().map_err(|_| Error::config(&path, format!("{raw:?} (from {name}) is not an integer")))?,
+        ),
+        toml::Value::Float(_) => toml::Value::Float(
+            raw.trim().parse().map_err(|_| Error::config(&path, format!("{raw:?} (from {name}) is not a number")))?,
+        ),
+        toml::Value::Boolean(_) => toml::Value::Boolean(match raw.trim() {
+            "true" | "1" => true,
+            "false" | "0" => false,
+            _ => return Err(Error::config(&path, format!("{raw:?} (from {name}) is not true/false"))),
+        }),
+        _ => return Err(Error::config(&path, "cannot be set from the environment")),
+    };
+    target.insert(key.clone(), value);
+    Ok(())
+}
+
+fn coerce(path: &str, default: &toml::Value, value: toml::Value) -> Result<toml::Value, Error> {
+    use toml::Value as V;
+    match (default, value) {
+        (V::String(_), v @ V::String(_)) | (V::Boolean(_), v @ V::Boolean(_)) | (V::Float(_), v @ V::Float(_)) => Ok(v),
+        (V::Integer(_), V::Integer(i)) => {
+            if i < 0 {
+                Err(Error::config(path, format!("{i} is negative")))
+            } else {
+                Ok(V::Integer(i))
+            }
+        }
+        (V::Float(_), V::Integer(i)) => Ok(V::Float(i as f64)),
+        (d, v) => Err(Error::config(path, format!("expected a {}, found {} {v}", d.type_str(), v.type_str()))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir() -> PathBuf {
+        let d = std::env::temp_dir().join(format!("landing-config-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn write(name: &str, text: &str) -> PathBuf {
+        let p = dir().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    fn no_model() -> Vec<(String, String)> {
+        vec![("LANDING__SEGMENTATION__ENABLED".into(), "false".into())]
+    }
+
+    #[test]
+    fn defaults_match_the_contract() {
+        let c = Config::default();
+        assert_eq!(c.server.listen, "0.0.0.0:50051");
+        assert_eq!(c.server.metrics_listen, "0.0.0.0:9464");
+        assert_eq!(c.server.max_request_bytes, 67_108_864);
+        assert_eq!(c.server.shutdown_grace_s, 20.0);
+        assert_eq!((c.pipeline.geometry_workers, c.pipeline.queue_capacity, c.pipeline.stream_buffer), (0, 64, 4));
+        assert_eq!(c.segmentation.model_path, PathBuf::from("models/rooftop-segmentation.onnx"));
+        assert_eq!((c.log.format.as_str(), c.log.filter.as_str()), ("pretty", "info"));
+    }
+
+    #[test]
+    fn file_then_env_override_defaults() {
+        let path = write(
+            "layered.toml",
+            "[server]\nlisten = \"127.0.0.1:6000\"\nshutdown_grace_s = 3\n[pipeline]\nqueue_capacity = 8\n\
+             [segmentation]\nenabled = false\n",
+        );
+        let env = vec![
+            ("LANDING__SERVER__LISTEN".to_owned(), "127.0.0.1:7000".to_owned()),
+            ("LANDING__PIPELINE__STREAM_BUFFER".to_owned(), "9".to_owned()),
+            ("UNRELATED".to_owned(), "x".to_owned()),
+        ];
+        let c = Config::load(Some(&path), env).unwrap();
+        assert_eq!(c.server.listen, "127.0.0.1:7000");
+        assert_eq!(c.server.shutdown_grace_s, 3.0);
+        assert_eq!(c.pipeline.queue_capacity, 8);
+        assert_eq!(c.pipeline.stream_buffer, 9);
+        assert_eq!(c.server.metrics_listen, "0.0.0.0:9464");
+    }
+
+    #[test]
+    fn unknown_keys_are_named() {
+        let path = write("unknown.toml", "[server]\nlisten = \"127.0.0.1:1\"\nlisen = \"x\"\n");
+        let e = Config::load(Some(&path), no_model()).unwrap_err().to_string();
+        assert!(e.contains("server.lisen") && e.contains("unknown key"), "{e}");
+        let path = write("unknown-section.toml", "[sever]\nlisten = \"x\"\n");
+        let e = Config::load(Some(&path), no_model()).unwrap_err().to_string();
+        assert!(e.contains("`sever`") && e.contains("unknown section"), "{e}");
+        let env = vec![("LANDING__SERVER__PORT".to_owned(), "1".to_owned())];
+        let e = Config::load(None, env).unwrap_err().to_string();
+        assert!(e.contains("LANDING__SERVER__PORT") && e.contains("unknown key"), "{e}");
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let cases = [
+            ("[server]\nlisten = \"nowhere\"\n", "server.listen"),
+            ("[server]\nmax_request_bytes = 10\n", "server.max_request_bytes"),
+            ("[server]\nshutdown_grace_s = \"soon\"\n", "server.shutdown_grace_s"),
+            ("[pipeline]\nqueue_capacity = 0\n", "pipeline.queue_capacity"),
+            ("[pipeline]\ngeometry_workers = -1\n", "pipeline.geometry_workers"),
+            ("[segmentation]\nexecution_provider = \"tpu\"\n", "segmentation.execution_provider"),
+            ("[segmentation]\nmodel_path = \"/nonexistent/model.onnx\"\n", "segmentation.model_path"),
+            ("[auth]\ntokens_file = \"/nonexistent/tokens\"\n", "auth.tokens_file"),
+            ("[tls]\ncert_path = \"/nonexistent/cert.pem\"\n", "tls.key_path"),
+            ("[log]\nformat = \"xml\"\n", "log.format"),
+            ("[log]\nfilter = \"[[[\"\n", "log.filter"),
+        ];
+        for (i, (text, key)) in cases.into_iter().enumerate() {
+            let path = write(&format!("bad{i}.toml"), text);
+            let env = if key.starts_with("segmentation") { vec![] } else { no_model() };
+            let e = Config::load(Some(&path), env).unwrap_err().to_string();
+            assert!(e.contains(key), "{text}: {e}");
+        }
+        let e = Config::load(None, vec![("LANDING__PIPELINE__STREAM_BUFFER".to_owned(), "many".to_owned())])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("pipeline.stream_buffer") && e.contains("many"), "{e}");
+    }
+
+    #[test]
+    fn tokens_file_and_round_trip() {
+        let tokens = write("tokens", "# fleet\nalpha\n\n  beta \n");
+        assert_eq!(read_tokens(&tokens).unwrap(), vec!["alpha", "beta"]);
+        let mut c = Config::default();
+        c.segmentation.enabled = false;
+        c.auth.tokens_file = tokens;
+        let path = write("round.toml", &c.to_toml());
+        assert_eq!(Config::load(Some(&path), vec![]).unwrap(), c);
+    }
+}

@@ -1,0 +1,137 @@
+//! The offline `detect` command: a PLY file through the same pipeline as the service, printed as
+//! JSON or as a table.
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::time::Duration;
+
+use nalgebra::Isometry3;
+use serde_json::json;
+
+use crate::Error;
+use crate::pipeline::{Cloud, Frame, FrameOptions, FrameOutput, Pipeline, SegmentationMode, run_pipeline};
+use crate::ply;
+
+/// Reads the PLY at `path` and runs the pipeline on it (classes from the file when it has them).
+pub fn detect_ply(path: &Path, options: &FrameOptions, pipeline: &Pipeline) -> Result<FrameOutput, Error> {
+    let cloud = ply::read(path)?;
+    let frame = Frame {
+        drone_id: String::new(),
+        sequence: 0,
+        timestamp: None,
+        cloud: Cloud { points: cloud.points, classes: cloud.classes, pose: Isometry3::identity() },
+        image: None,
+        geodetic_origin: None,
+    };
+    run_pipeline(&frame, options, pipeline)
+}
+
+/// The result as the JSON document of `detect --json`.
+pub fn to_json(out: &FrameOutput) -> serde_json::Value {
+    let sites: Vec<_> = out
+        .sites
+        .iter()
+        .map(|s| {
+            let mut site = json!({
+                "rank": s.rank,
+                "shell": s.shell,
+                "holes": s.holes,
+                "center": s.center,
+                "safe_radius_m": s.safe_radius_m,
+                "area_m2": s.area_m2,
+                "normal": s.normal,
+                "plane_height_m": s.plane_height_m,
+                "point_count": s.point_count,
+                "triangle_count": s.triangle_count,
+            });
+            if let Some(g) = s.center_geodetic {
+                site["center_geodetic"] = json!([g.latitude_deg, g.longitude_deg, g.altitude_m]);
+            }
+            site
+        })
+        .collect();
+    json!({
+        "sites": sites,
+        "segmentation_mode": mode_name(out.segmentation_mode),
+        "point_count": out.point_count,
+        "triangle_count": out.triangle_count,
+        "timings_us": timings_us(out),
+    })
+}
+
+/// The result as a readable table.
+pub fn to_table(out: &FrameOutput) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "{} points, {} triangles, classes: {}, {} site(s)",
+        out.point_count,
+        out.triangle_count,
+        mode_name(out.segmentation_mode),
+        out.sites.len()
+    );
+    if !out.sites.is_empty() {
+        let _ = writeln!(
+            s,
+            "{:>4}  {:>28}  {:>10}  {:>10}  {:>5}  {:>9}",
+            "rank", "center x, y, z (m)", "radius (m)", "area (m2)", "holes", "triangles"
+        );
+    }
+    for site in &out.sites {
+        let c = site.center;
+        let _ = writeln!(
+            s,
+            "{:>4}  {:>28}  {:>10.2}  {:>10.1}  {:>5}  {:>9}",
+            site.rank,
+            format!("{:.2}, {:.2}, {:.2}", c[0], c[1], c[2]),
+            site.safe_radius_m,
+            site.area_m2,
+            site.holes.len(),
+            site.triangle_count
+        );
+    }
+    let timings = timings_us(out);
+    let steps: Vec<String> = timings
+        .as_object()
+        .into_iter()
+        .flatten()
+        .map(|(k, v)| format!("{k} {v} µs"))
+        .collect();
+    let _ = writeln!(s, "timings: {}", steps.join(", "));
+    s
+}
+
+fn timings_us(out: &FrameOutput) -> serde_json::Value {
+    let t = &out.timings;
+    let mut map = serde_json::Map::new();
+    for (name, d) in [
+        ("decode", t.decode),
+        ("segmentation", t.segmentation),
+        ("classification", t.classification),
+        ("triangulation", t.triangulation),
+        ("triangle_filter", t.triangle_filter),
+        ("plane_extraction", t.plane_extraction),
+        ("polygon_extraction", t.polygon_extraction),
+        ("polylabel", t.polylabel),
+        ("total", t.total),
+    ] {
+        if let Some(d) = d {
+            map.insert(name.to_owned(), json!(micros(d)));
+        }
+    }
+    serde_json::Value::Object(map)
+}
+
+fn micros(d: Duration) -> u64 {
+    u64::try_from(d.as_micros()).unwrap_or(u64::MAX)
+}
+
+/// Lower-case name of a mode, as printed.
+pub fn mode_name(mode: SegmentationMode) -> &'static str {
+    match mode {
+        SegmentationMode::Auto => "auto",
+        SegmentationMode::Model => "model",
+        SegmentationMode::PointClasses => "point_classes",
+        SegmentationMode::None => "none",
+    }
+}

@@ -1,0 +1,102 @@
+//! The one error type of this crate. `status.rs` maps every variant to a gRPC status.
+
+use std::time::Duration;
+
+use landing_geometry::GeometryError;
+
+/// A field of a request that failed validation, named by its path in the request
+/// (`frame.point_cloud.data`, `options.min_normal_dot`, ...).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FieldViolation {
+    /// Path of the field, dot-separated, with `[i]` for repeated fields.
+    pub field: String,
+    /// Why the value is wrong, with the value.
+    pub description: String,
+}
+
+impl FieldViolation {
+    /// A violation of `field`.
+    pub fn new(field: impl Into<String>, description: impl Into<String>) -> Self {
+        Self { field: field.into(), description: description.into() }
+    }
+}
+
+/// Everything that can go wrong in the server, the offline command and their inputs.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// A request field is invalid (one or more violations, each naming its field).
+    #[error("invalid request: {}", describe(.0))]
+    InvalidArgument(Vec<FieldViolation>),
+    /// The frame asked for model segmentation but the server has no model loaded.
+    #[error("segmentation mode MODEL was requested but {0}")]
+    ModelUnavailable(String),
+    /// Segmentation failed inside the model runtime.
+    #[error("segmentation failed: {0}")]
+    Segmentation(String),
+    /// The geometry pipeline rejected its input or parameters.
+    #[error("geometry: {0}")]
+    Geometry(GeometryError),
+    /// Admission control: the server is at capacity; retry after the given delay.
+    #[error("server at capacity ({capacity} frames in flight); retry in {retry_after:?}")]
+    Overloaded { capacity: usize, retry_after: Duration },
+    /// The caller's deadline passed before the frame was computed.
+    #[error("the deadline passed before the frame was processed")]
+    DeadlineExceeded,
+    /// The caller went away.
+    #[error("the call was cancelled")]
+    Cancelled,
+    /// The server is draining for shutdown and takes no new frames.
+    #[error("the server is shutting down")]
+    ShuttingDown,
+    /// No or wrong bearer token.
+    #[error("missing or invalid bearer token")]
+    Unauthenticated,
+    /// A bug or a crashed worker; never the caller's fault.
+    #[error("internal error: {0}")]
+    Internal(String),
+    /// A configuration key has a bad value or is unknown.
+    #[error("config key `{key}`: {reason}")]
+    Config { key: String, reason: String },
+    /// A file could not be read.
+    #[error("cannot read `{path}`: {reason}")]
+    Io { path: String, reason: String },
+    /// A PLY header is malformed or unsupported.
+    #[error("PLY header, line {line}: {reason}")]
+    PlyHeader { line: usize, reason: String },
+    /// The PLY vertex element lacks a required property.
+    #[error("PLY element `{element}` has no property `{property}`")]
+    PlyMissingProperty { element: String, property: String },
+    /// A PLY property has a type this reader cannot use for its role.
+    #[error("PLY element `{element}`, property `{property}`: {reason}")]
+    PlyUnsupportedProperty { element: String, property: String, reason: String },
+    /// PLY body data is malformed or truncated.
+    #[error("PLY data, {element} {index}, property `{property}`: {reason}")]
+    PlyData { element: String, index: usize, property: String, reason: String },
+}
+
+impl Error {
+    /// One invalid field.
+    pub fn invalid(field: impl Into<String>, description: impl Into<String>) -> Self {
+        Self::InvalidArgument(vec![FieldViolation::new(field, description)])
+    }
+
+    /// A bad configuration key.
+    pub fn config(key: impl Into<String>, reason: impl Into<String>) -> Self {
+        Self::Config { key: key.into(), reason: reason.into() }
+    }
+}
+
+impl From<GeometryError> for Error {
+    fn from(e: GeometryError) -> Self {
+        Self::Geometry(e)
+    }
+}
+
+fn describe(violations: &[FieldViolation]) -> String {
+    violations
+        .iter()
+        .map(|v| format!("`{}`: {}", v.field, v.description))
+        .collect::<Vec<_>>()
+        .join("; ")
+}

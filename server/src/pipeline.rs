@@ -1,0 +1,349 @@
+//! The in-process pipeline: one validated frame in, ranked landing sites in world coordinates out.
+//!
+//! Synchronous and free of tonic types: the service calls [`run_pipeline`] on its worker pool,
+//! and tests and benchmarks call it directly to compare with what the service answers.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use landing_geometry::Params;
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+
+use crate::Error;
+use crate::geodetic::{Geodetic, enu_to_geodetic};
+use crate::segmentation::Segmenter;
+
+/// Where the point classes of a frame come from. `Auto` is the proto's UNSPECIFIED.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SegmentationMode {
+    /// Model if the frame has an image and the server a model, else the cloud's classes if it has
+    /// them, else none.
+    #[default]
+    Auto,
+    /// Segment the image with the server's model.
+    Model,
+    /// Use the cloud's "class" field.
+    PointClasses,
+    /// Geometry only.
+    None,
+}
+
+/// A validated LiDAR scan: points in the LiDAR frame and the pose `T_world_lidar`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cloud {
+    pub points: Vec<[f32; 3]>,
+    /// One [`landing_geometry::SemanticClass`] number per point, when the cloud has a class field.
+    pub classes: Option<Vec<u8>>,
+    pub pose: Isometry3<f64>,
+}
+
+/// The pixels of a validated camera image (decoded only when needed).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ImagePixels {
+    /// PNG or JPEG bytes; `format` is "png" or "jpeg".
+    Encoded { format: String, data: Vec<u8> },
+    /// Packed RGB8 rows.
+    Rgb8 { width: u32, height: u32, step: u32, data: Vec<u8> },
+}
+
+/// Pinhole intrinsics: `u = fx * x / z + cx`, `v = fy * y / z + cy`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    pub width: u32,
+    pub height: u32,
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+}
+
+/// A validated camera image: pixels, `T_world_camera` (optical convention) and intrinsics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CameraImage {
+    pub pixels: ImagePixels,
+    pub pose: Isometry3<f64>,
+    pub intrinsics: Intrinsics,
+}
+
+/// A validated frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    pub drone_id: String,
+    pub sequence: u64,
+    pub timestamp: Option<prost_types::Timestamp>,
+    pub cloud: Cloud,
+    pub image: Option<CameraImage>,
+    pub geodetic_origin: Option<Geodetic>,
+}
+
+/// Validated per-frame options: geometry parameters and segmentation mode.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameOptions {
+    pub params: Params,
+    pub segmentation_mode: SegmentationMode,
+}
+
+/// Time spent in each step; `None` for steps that did not run.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StageTimings {
+    pub queue: Option<Duration>,
+    pub decode: Option<Duration>,
+    pub segmentation: Option<Duration>,
+    pub classification: Option<Duration>,
+    pub triangulation: Option<Duration>,
+    pub triangle_filter: Option<Duration>,
+    pub plane_extraction: Option<Duration>,
+    pub polygon_extraction: Option<Duration>,
+    pub polylabel: Option<Duration>,
+    pub total: Option<Duration>,
+}
+
+/// One landing site in world coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Site {
+    pub rank: u32,
+    /// Shell, counter-clockwise seen from above, at the plane height.
+    pub shell: Vec<[f64; 3]>,
+    /// Holes, clockwise.
+    pub holes: Vec<Vec<[f64; 3]>>,
+    pub plane_height_m: f64,
+    pub center: [f64; 3],
+    pub center_geodetic: Option<Geodetic>,
+    pub safe_radius_m: f64,
+    pub area_m2: f64,
+    pub normal: [f64; 3],
+    pub point_count: usize,
+    pub triangle_count: usize,
+}
+
+/// The result of one frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameOutput {
+    pub drone_id: String,
+    pub sequence: u64,
+    pub timestamp: Option<prost_types::Timestamp>,
+    pub sites: Vec<Site>,
+    /// The mode actually used (never `Auto`).
+    pub segmentation_mode: SegmentationMode,
+    pub point_count: usize,
+    pub triangle_count: usize,
+    pub timings: StageTimings,
+}
+
+/// What the pipeline needs besides the frame: the default parameters and the segmentation model.
+#[derive(Clone, Default)]
+pub struct Pipeline {
+    /// Parameters used for unset options (the paper's values by default).
+    pub defaults: Params,
+    /// The segmentation model, when one is loaded.
+    pub segmenter: Option<Arc<Segmenter>>,
+}
+
+impl std::fmt::Debug for Pipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pipeline")
+            .field("defaults", &self.defaults)
+            .field("segmenter", &self.segmenter.as_ref().map(|s| s.describe()))
+            .finish()
+    }
+}
+
+impl Pipeline {
+    /// A pipeline without a model, using `defaults` for unset options.
+    pub fn geometry_only(defaults: Params) -> Self {
+        Self { defaults, segmenter: None }
+    }
+
+    /// Resolves `Auto` for this frame, and checks that the chosen mode has what it needs.
+    pub fn resolve_mode(&self, frame: &Frame, requested: SegmentationMode) -> Result<SegmentationMode, Error> {
+        match requested {
+            SegmentationMode::Auto => Ok(if frame.image.is_some() && self.segmenter.is_some() {
+                SegmentationMode::Model
+            } else if frame.cloud.classes.is_some() {
+                SegmentationMode::PointClasses
+            } else {
+                SegmentationMode::None
+            }),
+            SegmentationMode::Model => {
+                if frame.image.is_none() {
+                    return Err(Error::invalid(
+                        "frame.image",
+                        "segmentation mode MODEL needs an image, and the frame has none",
+                    ));
+                }
+                if self.segmenter.is_none() {
+                    return Err(Error::ModelUnavailable("this server has no segmentation model loaded".into()));
+                }
+                Ok(SegmentationMode::Model)
+            }
+            SegmentationMode::PointClasses => {
+                if frame.cloud.classes.is_none() {
+                    return Err(Error::invalid(
+                        "frame.point_cloud.fields",
+                        "segmentation mode POINT_CLASSES needs a \"class\" field, and the cloud has none",
+                    ));
+                }
+                Ok(SegmentationMode::PointClasses)
+            }
+            SegmentationMode::None => Ok(SegmentationMode::None),
+        }
+    }
+}
+
+/// Runs the whole pipeline on one frame: classes (per the mode), world transform, geometry,
+/// and world/geodetic results. Blocking and CPU-bound: call it from a worker thread.
+pub fn run_pipeline(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<FrameOutput, Error> {
+    let start = Instant::now();
+    let mut timings = StageTimings::default();
+    let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
+
+    let world = to_world(&frame.cloud);
+    let model_classes;
+    let classes: Option<&[u8]> = match mode {
+        SegmentationMode::Model => {
+            let (image, segmenter) = match (&frame.image, &pipeline.segmenter) {
+                (Some(image), Some(segmenter)) => (image, segmenter),
+                // resolve_mode checked both; keep the error rather than panic.
+                _ => return Err(Error::Internal("model mode without image or model".into())),
+            };
+            let out = segmenter.classify(image, &world)?;
+            timings.decode = Some(out.decode);
+            timings.segmentation = Some(out.segmentation);
+            timings.classification = Some(out.classification);
+            model_classes = out.classes;
+            Some(&model_classes)
+        }
+        SegmentationMode::PointClasses => frame.cloud.classes.as_deref(),
+        SegmentationMode::None | SegmentationMode::Auto => None,
+    };
+
+    let detection = landing_geometry::detect(&world, classes, &options.params)?;
+    let t = detection.timings;
+    timings.triangulation = Some(t.triangulation);
+    timings.triangle_filter = Some(t.triangle_filter);
+    timings.plane_extraction = Some(t.plane_extraction);
+    timings.polygon_extraction = Some(t.polygon_extraction);
+    timings.polylabel = Some(t.polylabel);
+
+    let sites = detection
+        .sites
+        .iter()
+        .map(|s| {
+            let z = s.plane_height_m;
+            let ring = |r: &[[f64; 2]]| r.iter().map(|p| [p[0], p[1], z]).collect::<Vec<_>>();
+            Site {
+                rank: s.rank,
+                shell: ring(&s.polygon.shell),
+                holes: s.polygon.holes.iter().map(|h| ring(h)).collect(),
+                plane_height_m: z,
+                center: s.center,
+                center_geodetic: frame.geodetic_origin.map(|o| enu_to_geodetic(o, s.center)),
+                safe_radius_m: s.safe_radius_m,
+                area_m2: s.area_m2,
+                normal: s.normal,
+                point_count: s.point_count,
+                triangle_count: s.triangle_count,
+            }
+        })
+        .collect();
+    timings.total = Some(start.elapsed());
+    Ok(FrameOutput {
+        drone_id: frame.drone_id.clone(),
+        sequence: frame.sequence,
+        timestamp: frame.timestamp,
+        sites,
+        segmentation_mode: mode,
+        point_count: detection.point_count,
+        triangle_count: detection.triangle_count,
+        timings,
+    })
+}
+
+/// The cloud's points moved to the world frame by its pose (skipped for the identity).
+pub fn to_world(cloud: &Cloud) -> Vec<[f32; 3]> {
+    if cloud.pose == Isometry3::identity() {
+        return cloud.points.clone();
+    }
+    cloud
+        .points
+        .iter()
+        .map(|p| {
+            let w = cloud.pose * Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            [w.x as f32, w.y as f32, w.z as f32]
+        })
+        .collect()
+}
+
+/// A pose from a position and a quaternion (x, y, z, w) that is normalised here; `None` when the
+/// quaternion has (near) zero norm or a non-finite component.
+pub fn pose(position: [f64; 3], quaternion: [f64; 4]) -> Option<Isometry3<f64>> {
+    let [x, y, z, w] = quaternion;
+    let q = nalgebra::Quaternion::new(w, x, y, z);
+    let norm = q.norm();
+    if !norm.is_finite() || norm < 1e-9 || position.iter().any(|c| !c.is_finite()) {
+        return None;
+    }
+    Some(Isometry3::from_parts(
+        Vector3::new(position[0], position[1], position[2]).into(),
+        UnitQuaternion::from_quaternion(q),
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(points: Vec<[f32; 3]>, classes: Option<Vec<u8>>) -> Frame {
+        Frame {
+            drone_id: "d1".into(),
+            sequence: 7,
+            timestamp: None,
+            cloud: Cloud { points, classes, pose: Isometry3::identity() },
+            image: None,
+            geodetic_origin: None,
+        }
+    }
+
+    #[test]
+    fn pose_normalises_and_rejects_zero_quaternion() {
+        let p = pose([1.0, 2.0, 3.0], [0.0, 0.0, 0.0, 2.0]).unwrap();
+        assert_eq!(p, Isometry3::translation(1.0, 2.0, 3.0));
+        assert!(pose([0.0; 3], [0.0; 4]).is_none());
+        assert!(pose([f64::NAN, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]).is_none());
+    }
+
+    #[test]
+    fn to_world_rotates_and_translates() {
+        // 90 degrees about z: x -> y.
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let cloud = Cloud {
+            points: vec![[1.0, 0.0, 0.0]],
+            classes: None,
+            pose: pose([10.0, 0.0, 5.0], [0.0, 0.0, h, h]).unwrap(),
+        };
+        let w = to_world(&cloud)[0];
+        assert!((w[0] - 10.0).abs() < 1e-5 && (w[1] - 1.0).abs() < 1e-5 && (w[2] - 5.0).abs() < 1e-5, "{w:?}");
+    }
+
+    #[test]
+    fn auto_mode_resolves_by_what_the_frame_has() {
+        let p = Pipeline::default();
+        let with_classes = frame(vec![], Some(vec![]));
+        assert_eq!(p.resolve_mode(&with_classes, SegmentationMode::Auto), Ok(SegmentationMode::PointClasses));
+        let bare = frame(vec![], None);
+        assert_eq!(p.resolve_mode(&bare, SegmentationMode::Auto), Ok(SegmentationMode::None));
+        let e = p.resolve_mode(&bare, SegmentationMode::PointClasses).unwrap_err();
+        assert!(e.to_string().contains("frame.point_cloud.fields"), "{e}");
+        let e = p.resolve_mode(&bare, SegmentationMode::Model).unwrap_err();
+        assert!(e.to_string().contains("frame.image"), "{e}");
+    }
+
+    #[test]
+    fn pipeline_echoes_identity_and_mode() {
+        let out = run_pipeline(&frame(vec![[0.0, 0.0, 0.0]; 3], None), &FrameOptions::default(), &Pipeline::default())
+            .unwrap();
+        assert_eq!((out.drone_id.as_str(), out.sequence), ("d1", 7));
+        assert_eq!(out.segmentation_mode, SegmentationMode::None);
+        assert!(out.timings.total.is_some());
+    }
+}
