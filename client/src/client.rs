@@ -355,7 +355,8 @@ pub struct FrameSender {
 }
 
 impl FrameSender {
-    /// Sends one frame with the stream's options. Waits while the window is full.
+    /// Sends one frame with the stream's options. Waits while the window is full. Cancel-safe:
+    /// a send abandoned while waiting leaves nothing in flight.
     pub async fn send(&mut self, frame: Frame) -> Result<(), ClientError> {
         let options = self.config.options.clone();
         self.send_with(frame, options).await
@@ -368,7 +369,9 @@ impl FrameSender {
         options: Option<PipelineOptions>,
     ) -> Result<(), ClientError> {
         let seq = frame.sequence;
+        // Both waits are cancel-safe: nothing is recorded until the frame is handed over.
         let permit = self.window.acquire().await.map_err(|_| ClientError::StreamClosed(seq))?;
+        let slot = self.tx.reserve().await.map_err(|_| ClientError::StreamClosed(seq))?;
         {
             let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
             if pending.iter().any(|(s, _)| *s == seq) {
@@ -379,13 +382,7 @@ impl FrameSender {
         permit.forget();
         let overflow_policy = if self.first { self.config.overflow_policy as i32 } else { 0 };
         self.first = false;
-        let request = StreamLandingSitesRequest { frame: Some(frame), options, overflow_policy };
-        if self.tx.send(request).await.is_err() {
-            // The call is over: the frame never left, so it is not pending.
-            let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
-            pending.retain(|(s, _)| *s != seq);
-            return Err(ClientError::StreamClosed(seq));
-        }
+        slot.send(StreamLandingSitesRequest { frame: Some(frame), options, overflow_policy });
         Ok(())
     }
 
@@ -400,7 +397,7 @@ impl FrameSender {
 
 enum StreamState {
     Opening(tokio::task::JoinHandle<Result<tonic::Response<tonic::Streaming<StreamLandingSitesResponse>>, tonic::Status>>),
-    Open(tonic::Streaming<StreamLandingSitesResponse>),
+    Open(Box<tonic::Streaming<StreamLandingSitesResponse>>),
     Done,
 }
 
@@ -481,7 +478,7 @@ impl Stream for ResultStream {
                 StreamState::Opening(call) => match Pin::new(call).poll(cx) {
                     Poll::Pending => return Poll::Pending,
                     Poll::Ready(Ok(Ok(response))) => {
-                        self.state = StreamState::Open(response.into_inner());
+                        self.state = StreamState::Open(Box::new(response.into_inner()));
                     }
                     Poll::Ready(Ok(Err(status))) => return Poll::Ready(self.broken(Some(&status))),
                     Poll::Ready(Err(join)) => {

@@ -149,7 +149,7 @@ pub fn unpack_point_cloud(cloud: &PointCloud) -> Result<UnpackedCloud, ClientErr
             reason: "must be > 0".into(),
         });
     }
-    if cloud.data.len() % stride != 0 {
+    if !cloud.data.len().is_multiple_of(stride) {
         return Err(ClientError::InvalidInput {
             field: "point_cloud.data",
             reason: format!("{} bytes is not a multiple of the stride {stride}", cloud.data.len()),

@@ -34,11 +34,16 @@
 
 #![forbid(unsafe_code)]
 
+pub mod cli;
 mod client;
 mod config;
 mod error;
 mod frame;
+pub mod loadtest;
 mod outcome;
+pub mod ply;
+pub mod recording;
+pub mod render;
 
 pub use client::{FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig};
 pub use config::{ClientConfig, DEFAULT_SERVER, RetryPolicy, TlsConfig};

@@ -124,10 +124,10 @@ mod tests {
 
     #[test]
     fn long_edges_are_dropped_in_3d() {
-        // 2-D edges of 3 m, but a 3 m rise makes the 3-D edge 4.24 m > l_max.
-        let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 3.0, 0.0]];
+        // 2-D edges of at most 3.6 m, but a 3 m rise makes an edge 4.24 m long in 3-D.
+        let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
         assert!(one(p, None, &FilterParams::default()));
-        let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 3.0], [0.0, 3.0, 0.0]];
+        let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 3.0], [0.0, 2.0, 0.0]];
         assert!(!one(p, None, &FilterParams { dot_min: 0.0, ..FilterParams::default() }));
         // Exactly l_max is dropped: the paper's test is strict.
         let p = [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 1.0, 0.0]];

@@ -271,7 +271,7 @@ pub enum GeometryError {
 ///
 /// Fewer than three distinct points, or points all on one line, give an empty [`Detection`], not an
 /// error: there is simply no surface. Non-finite or out-of-range coordinates (|c| > 1e7 m) give
-/// [`GeometryError::InvalidPoint`]; duplicated x/y positions are triangulated once (first wins).
+/// [`GeometryError::InvalidPoint`]; a duplicated x/y position is triangulated once (its other copies are left out).
 pub fn detect(
     points: &[[f32; 3]],
     classes: Option<&[u8]>,

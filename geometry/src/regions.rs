@@ -108,10 +108,16 @@ mod tests {
             .chunks_exact(3)
             .map(|t| t.iter().all(|&v| pts[v as usize][0] != 4.0))
             .collect();
+        let kept = keep.iter().filter(|&&k| k).count();
         let r = extract_regions(&tri, keep, &RegionParams { min_triangles: 1 }).unwrap();
         assert_eq!(r.regions.len(), 2);
         let total: usize = r.regions.iter().map(|r| r.triangles.len()).sum();
-        assert_eq!(total, 2 * 2 * 4 * 4);
+        assert_eq!(total, kept);
+        // Seeds in triangle order: each region starts at its smallest triangle.
+        assert!(r.regions[0].triangles[0] < r.regions[1].triangles[0]);
+        for region in &r.regions {
+            assert_eq!(region.triangles.iter().min(), region.triangles.first());
+        }
         let r = extract_regions(&tri, vec![true; tri.len()], &RegionParams { min_triangles: 1000 })
             .unwrap();
         assert!(r.regions.is_empty());

@@ -104,9 +104,15 @@ impl DetectArgs {
             max_sites: self.max_sites.unwrap_or(d.max_sites),
             ..d
         };
-        let segmentation_mode =
-            if self.ignore_classes { SegmentationMode::None } else { SegmentationMode::Auto };
-        FrameOptions { params, segmentation_mode }
+        let segmentation_mode = if self.ignore_classes {
+            SegmentationMode::None
+        } else {
+            SegmentationMode::Auto
+        };
+        FrameOptions {
+            params,
+            segmentation_mode,
+        }
     }
 }
 
@@ -126,7 +132,11 @@ where
         Ok(cli) => cli,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
+            return if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            };
         }
     };
     match run(cli) {
@@ -185,7 +195,8 @@ pub fn load_config(args: &ConfigArgs) -> anyhow::Result<Config> {
     if let Some(metrics) = &args.metrics_listen {
         env.push(("LANDING__SERVER__METRICS_LISTEN".into(), metrics.clone()));
     }
-    let config = Config::load(args.config.as_deref(), dedup_last(env)).context("invalid configuration")?;
+    let config =
+        Config::load(args.config.as_deref(), dedup_last(env)).context("invalid configuration")?;
     Ok(config)
 }
 

@@ -60,7 +60,11 @@ pub struct PipelineConfig {
 
 impl Default for PipelineConfig {
     fn default() -> Self {
-        Self { geometry_workers: 0, queue_capacity: 64, stream_buffer: 4 }
+        Self {
+            geometry_workers: 0,
+            queue_capacity: 64,
+            stream_buffer: 4,
+        }
     }
 }
 
@@ -133,7 +137,10 @@ pub struct LogConfig {
 
 impl Default for LogConfig {
     fn default() -> Self {
-        Self { format: "pretty".into(), filter: "info".into() }
+        Self {
+            format: "pretty".into(),
+            filter: "info".into(),
+        }
     }
 }
 
@@ -154,12 +161,17 @@ impl Config {
                 reason: e.to_string(),
             })?;
             let parsed: toml::Table = text.parse().map_err(|e: toml::de::Error| {
-                Error::config(format!("(file {})", path.display()), e.to_string().trim().to_owned())
+                Error::config(
+                    format!("(file {})", path.display()),
+                    e.to_string().trim().to_owned(),
+                )
             })?;
             merge_file(&mut table, parsed)?;
         }
-        let mut env: Vec<(String, String)> =
-            env.into_iter().filter(|(k, _)| k.starts_with(ENV_PREFIX)).collect();
+        let mut env: Vec<(String, String)> = env
+            .into_iter()
+            .filter(|(k, _)| k.starts_with(ENV_PREFIX))
+            .collect();
         env.sort();
         for (name, value) in env {
             apply_env(&mut table, &name, &value)?;
@@ -191,13 +203,22 @@ impl Config {
         }
         let p = &self.pipeline;
         if p.geometry_workers > 1024 {
-            return Err(Error::config("pipeline.geometry_workers", format!("{} is above 1024", p.geometry_workers)));
+            return Err(Error::config(
+                "pipeline.geometry_workers",
+                format!("{} is above 1024", p.geometry_workers),
+            ));
         }
         if !(1..=1_000_000).contains(&p.queue_capacity) {
-            return Err(Error::config("pipeline.queue_capacity", format!("{} is outside 1..=1000000", p.queue_capacity)));
+            return Err(Error::config(
+                "pipeline.queue_capacity",
+                format!("{} is outside 1..=1000000", p.queue_capacity),
+            ));
         }
         if !(1..=10_000).contains(&p.stream_buffer) {
-            return Err(Error::config("pipeline.stream_buffer", format!("{} is outside 1..=10000", p.stream_buffer)));
+            return Err(Error::config(
+                "pipeline.stream_buffer",
+                format!("{} is outside 1..=10000", p.stream_buffer),
+            ));
         }
         let g = &self.segmentation;
         if !matches!(g.execution_provider.as_str(), "cpu" | "cuda") {
@@ -207,10 +228,16 @@ impl Config {
             ));
         }
         if !(1..=256).contains(&g.intra_threads) {
-            return Err(Error::config("segmentation.intra_threads", format!("{} is outside 1..=256", g.intra_threads)));
+            return Err(Error::config(
+                "segmentation.intra_threads",
+                format!("{} is outside 1..=256", g.intra_threads),
+            ));
         }
         if !(1..=64).contains(&g.sessions) {
-            return Err(Error::config("segmentation.sessions", format!("{} is outside 1..=64", g.sessions)));
+            return Err(Error::config(
+                "segmentation.sessions",
+                format!("{} is outside 1..=64", g.sessions),
+            ));
         }
         if g.enabled {
             require_file("segmentation.model_path", &g.model_path)?;
@@ -227,19 +254,36 @@ impl Config {
         let t = &self.tls;
         let (cert, key, ca) = (set(&t.cert_path), set(&t.key_path), set(&t.client_ca_path));
         if cert != key {
-            let missing = if cert { "tls.key_path" } else { "tls.cert_path" };
-            return Err(Error::config(missing, "tls.cert_path and tls.key_path must be set together"));
+            let missing = if cert {
+                "tls.key_path"
+            } else {
+                "tls.cert_path"
+            };
+            return Err(Error::config(
+                missing,
+                "tls.cert_path and tls.key_path must be set together",
+            ));
         }
         if ca && !cert {
-            return Err(Error::config("tls.client_ca_path", "client certificates need tls.cert_path and tls.key_path"));
+            return Err(Error::config(
+                "tls.client_ca_path",
+                "client certificates need tls.cert_path and tls.key_path",
+            ));
         }
-        for (key, path) in [("tls.cert_path", &t.cert_path), ("tls.key_path", &t.key_path), ("tls.client_ca_path", &t.client_ca_path)] {
+        for (key, path) in [
+            ("tls.cert_path", &t.cert_path),
+            ("tls.key_path", &t.key_path),
+            ("tls.client_ca_path", &t.client_ca_path),
+        ] {
             if set(path) {
                 require_file(key, path)?;
             }
         }
         if !matches!(self.log.format.as_str(), "pretty" | "json") {
-            return Err(Error::config("log.format", format!("{:?} is neither \"pretty\" nor \"json\"", self.log.format)));
+            return Err(Error::config(
+                "log.format",
+                format!("{:?} is neither \"pretty\" nor \"json\"", self.log.format),
+            ));
         }
         tracing_subscriber::EnvFilter::try_new(&self.log.filter)
             .map_err(|e| Error::config("log.filter", format!("{:?}: {e}", self.log.filter)))?;
@@ -267,8 +311,12 @@ impl Config {
 
 /// The bearer tokens of a tokens file: one per line, blank lines and `#` comments ignored.
 pub fn read_tokens(path: &Path) -> Result<Vec<String>, Error> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::config("auth.tokens_file", format!("cannot read {}: {e}", path.display())))?;
+    let text = std::fs::read_to_string(path).map_err(|e| {
+        Error::config(
+            "auth.tokens_file",
+            format!("cannot read {}: {e}", path.display()),
+        )
+    })?;
     Ok(text
         .lines()
         .map(str::trim)
@@ -285,14 +333,20 @@ fn require_file(key: &str, path: &Path) -> Result<(), Error> {
     if path.is_file() {
         Ok(())
     } else {
-        Err(Error::config(key, format!("{} is not a readable file", path.display())))
+        Err(Error::config(
+            key,
+            format!("{} is not a readable file", path.display()),
+        ))
     }
 }
 
 fn parse_addr(key: &str, value: &str) -> Result<SocketAddr, Error> {
-    value
-        .parse()
-        .map_err(|_| Error::config(key, format!("{value:?} is not an address like 0.0.0.0:50051")))
+    value.parse().map_err(|_| {
+        Error::config(
+            key,
+            format!("{value:?} is not an address like 0.0.0.0:50051"),
+        )
+    })
 }
 
 fn defaults_table() -> toml::Table {
@@ -338,21 +392,27 @@ fn apply_env(table: &mut toml::Table, name: &str, raw: &str) -> Result<(), Error
     let Some(default) = target.get(key) else {
         return Err(Error::config(format!("{name} ({path})"), "unknown key"));
     };
-    let value = match default {
-        toml::Value::String(_) => toml::Value::String(raw.to_owned()),
-        toml::Value::Integer(_) => toml::Value::Integer(
-            raw.trim().parse().map_err(|_| Error::config(&path, format!("{raw:?} (from {name}) is not an integer")))?,
-        ),
-        toml::Value::Float(_) => toml::Value::Float(
-            raw.trim().parse().map_err(|_| Error::config(&path, format!("{raw:?} (from {name}) is not a number")))?,
-        ),
-        toml::Value::Boolean(_) => toml::Value::Boolean(match raw.trim() {
-            "true" | "1" => true,
-            "false" | "0" => false,
-            _ => return Err(Error::config(&path, format!("{raw:?} (from {name}) is not true/false"))),
-        }),
-        _ => return Err(Error::config(&path, "cannot be set from the environment")),
-    };
+    let value =
+        match default {
+            toml::Value::String(_) => toml::Value::String(raw.to_owned()),
+            toml::Value::Integer(_) => toml::Value::Integer(raw.trim().parse().map_err(|_| {
+                Error::config(&path, format!("{raw:?} (from {name}) is not an integer"))
+            })?),
+            toml::Value::Float(_) => toml::Value::Float(raw.trim().parse().map_err(|_| {
+                Error::config(&path, format!("{raw:?} (from {name}) is not a number"))
+            })?),
+            toml::Value::Boolean(_) => toml::Value::Boolean(match raw.trim() {
+                "true" | "1" => true,
+                "false" | "0" => false,
+                _ => {
+                    return Err(Error::config(
+                        &path,
+                        format!("{raw:?} (from {name}) is not true/false"),
+                    ));
+                }
+            }),
+            _ => return Err(Error::config(&path, "cannot be set from the environment")),
+        };
     target.insert(key.clone(), value);
     Ok(())
 }
@@ -360,7 +420,9 @@ fn apply_env(table: &mut toml::Table, name: &str, raw: &str) -> Result<(), Error
 fn coerce(path: &str, default: &toml::Value, value: toml::Value) -> Result<toml::Value, Error> {
     use toml::Value as V;
     match (default, value) {
-        (V::String(_), v @ V::String(_)) | (V::Boolean(_), v @ V::Boolean(_)) | (V::Float(_), v @ V::Float(_)) => Ok(v),
+        (V::String(_), v @ V::String(_))
+        | (V::Boolean(_), v @ V::Boolean(_))
+        | (V::Float(_), v @ V::Float(_)) => Ok(v),
         (V::Integer(_), V::Integer(i)) => {
             if i < 0 {
                 Err(Error::config(path, format!("{i} is negative")))
@@ -369,7 +431,10 @@ fn coerce(path: &str, default: &toml::Value, value: toml::Value) -> Result<toml:
             }
         }
         (V::Float(_), V::Integer(i)) => Ok(V::Float(i as f64)),
-        (d, v) => Err(Error::config(path, format!("expected a {}, found {} {v}", d.type_str(), v.type_str()))),
+        (d, v) => Err(Error::config(
+            path,
+            format!("expected a {}, found {} {v}", d.type_str(), v.type_str()),
+        )),
     }
 }
 
@@ -400,9 +465,22 @@ mod tests {
         assert_eq!(c.server.metrics_listen, "0.0.0.0:9464");
         assert_eq!(c.server.max_request_bytes, 67_108_864);
         assert_eq!(c.server.shutdown_grace_s, 20.0);
-        assert_eq!((c.pipeline.geometry_workers, c.pipeline.queue_capacity, c.pipeline.stream_buffer), (0, 64, 4));
-        assert_eq!(c.segmentation.model_path, PathBuf::from("models/rooftop-segmentation.onnx"));
-        assert_eq!((c.log.format.as_str(), c.log.filter.as_str()), ("pretty", "info"));
+        assert_eq!(
+            (
+                c.pipeline.geometry_workers,
+                c.pipeline.queue_capacity,
+                c.pipeline.stream_buffer
+            ),
+            (0, 64, 4)
+        );
+        assert_eq!(
+            c.segmentation.model_path,
+            PathBuf::from("models/rooftop-segmentation.onnx")
+        );
+        assert_eq!(
+            (c.log.format.as_str(), c.log.filter.as_str()),
+            ("pretty", "info")
+        );
     }
 
     #[test]
@@ -413,8 +491,14 @@ mod tests {
              [segmentation]\nenabled = false\n",
         );
         let env = vec![
-            ("LANDING__SERVER__LISTEN".to_owned(), "127.0.0.1:7000".to_owned()),
-            ("LANDING__PIPELINE__STREAM_BUFFER".to_owned(), "9".to_owned()),
+            (
+                "LANDING__SERVER__LISTEN".to_owned(),
+                "127.0.0.1:7000".to_owned(),
+            ),
+            (
+                "LANDING__PIPELINE__STREAM_BUFFER".to_owned(),
+                "9".to_owned(),
+            ),
             ("UNRELATED".to_owned(), "x".to_owned()),
         ];
         let c = Config::load(Some(&path), env).unwrap();
@@ -427,42 +511,95 @@ mod tests {
 
     #[test]
     fn unknown_keys_are_named() {
-        let path = write("unknown.toml", "[server]\nlisten = \"127.0.0.1:1\"\nlisen = \"x\"\n");
-        let e = Config::load(Some(&path), no_model()).unwrap_err().to_string();
-        assert!(e.contains("server.lisen") && e.contains("unknown key"), "{e}");
+        let path = write(
+            "unknown.toml",
+            "[server]\nlisten = \"127.0.0.1:1\"\nlisen = \"x\"\n",
+        );
+        let e = Config::load(Some(&path), no_model())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("server.lisen") && e.contains("unknown key"),
+            "{e}"
+        );
         let path = write("unknown-section.toml", "[sever]\nlisten = \"x\"\n");
-        let e = Config::load(Some(&path), no_model()).unwrap_err().to_string();
-        assert!(e.contains("`sever`") && e.contains("unknown section"), "{e}");
+        let e = Config::load(Some(&path), no_model())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("`sever`") && e.contains("unknown section"),
+            "{e}"
+        );
         let env = vec![("LANDING__SERVER__PORT".to_owned(), "1".to_owned())];
         let e = Config::load(None, env).unwrap_err().to_string();
-        assert!(e.contains("LANDING__SERVER__PORT") && e.contains("unknown key"), "{e}");
+        assert!(
+            e.contains("LANDING__SERVER__PORT") && e.contains("unknown key"),
+            "{e}"
+        );
     }
 
     #[test]
     fn bad_values_are_named() {
         let cases = [
             ("[server]\nlisten = \"nowhere\"\n", "server.listen"),
-            ("[server]\nmax_request_bytes = 10\n", "server.max_request_bytes"),
-            ("[server]\nshutdown_grace_s = \"soon\"\n", "server.shutdown_grace_s"),
-            ("[pipeline]\nqueue_capacity = 0\n", "pipeline.queue_capacity"),
-            ("[pipeline]\ngeometry_workers = -1\n", "pipeline.geometry_workers"),
-            ("[segmentation]\nexecution_provider = \"tpu\"\n", "segmentation.execution_provider"),
-            ("[segmentation]\nmodel_path = \"/nonexistent/model.onnx\"\n", "segmentation.model_path"),
-            ("[auth]\ntokens_file = \"/nonexistent/tokens\"\n", "auth.tokens_file"),
-            ("[tls]\ncert_path = \"/nonexistent/cert.pem\"\n", "tls.key_path"),
+            (
+                "[server]\nmax_request_bytes = 10\n",
+                "server.max_request_bytes",
+            ),
+            (
+                "[server]\nshutdown_grace_s = \"soon\"\n",
+                "server.shutdown_grace_s",
+            ),
+            (
+                "[pipeline]\nqueue_capacity = 0\n",
+                "pipeline.queue_capacity",
+            ),
+            (
+                "[pipeline]\ngeometry_workers = -1\n",
+                "pipeline.geometry_workers",
+            ),
+            (
+                "[segmentation]\nexecution_provider = \"tpu\"\n",
+                "segmentation.execution_provider",
+            ),
+            (
+                "[segmentation]\nmodel_path = \"/nonexistent/model.onnx\"\n",
+                "segmentation.model_path",
+            ),
+            (
+                "[auth]\ntokens_file = \"/nonexistent/tokens\"\n",
+                "auth.tokens_file",
+            ),
+            (
+                "[tls]\ncert_path = \"/nonexistent/cert.pem\"\n",
+                "tls.key_path",
+            ),
             ("[log]\nformat = \"xml\"\n", "log.format"),
             ("[log]\nfilter = \"[[[\"\n", "log.filter"),
         ];
         for (i, (text, key)) in cases.into_iter().enumerate() {
             let path = write(&format!("bad{i}.toml"), text);
-            let env = if key.starts_with("segmentation") { vec![] } else { no_model() };
+            let env = if key.starts_with("segmentation") {
+                vec![]
+            } else {
+                no_model()
+            };
             let e = Config::load(Some(&path), env).unwrap_err().to_string();
             assert!(e.contains(key), "{text}: {e}");
         }
-        let e = Config::load(None, vec![("LANDING__PIPELINE__STREAM_BUFFER".to_owned(), "many".to_owned())])
-            .unwrap_err()
-            .to_string();
-        assert!(e.contains("pipeline.stream_buffer") && e.contains("many"), "{e}");
+        let e = Config::load(
+            None,
+            vec![(
+                "LANDING__PIPELINE__STREAM_BUFFER".to_owned(),
+                "many".to_owned(),
+            )],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("pipeline.stream_buffer") && e.contains("many"),
+            "{e}"
+        );
     }
 
     #[test]

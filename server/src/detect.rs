@@ -9,17 +9,27 @@ use nalgebra::Isometry3;
 use serde_json::json;
 
 use crate::Error;
-use crate::pipeline::{Cloud, Frame, FrameOptions, FrameOutput, Pipeline, SegmentationMode, run_pipeline};
+use crate::pipeline::{
+    Cloud, Frame, FrameOptions, FrameOutput, Pipeline, SegmentationMode, run_pipeline,
+};
 use crate::ply;
 
 /// Reads the PLY at `path` and runs the pipeline on it (classes from the file when it has them).
-pub fn detect_ply(path: &Path, options: &FrameOptions, pipeline: &Pipeline) -> Result<FrameOutput, Error> {
+pub fn detect_ply(
+    path: &Path,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+) -> Result<FrameOutput, Error> {
     let cloud = ply::read(path)?;
     let frame = Frame {
         drone_id: String::new(),
         sequence: 0,
         timestamp: None,
-        cloud: Cloud { points: cloud.points, classes: cloud.classes, pose: Isometry3::identity() },
+        cloud: Cloud {
+            points: cloud.points,
+            classes: cloud.classes,
+            pose: Isometry3::identity(),
+        },
         image: None,
         geodetic_origin: None,
     };

@@ -17,7 +17,10 @@ pub struct FieldViolation {
 impl FieldViolation {
     /// A violation of `field`.
     pub fn new(field: impl Into<String>, description: impl Into<String>) -> Self {
-        Self { field: field.into(), description: description.into() }
+        Self {
+            field: field.into(),
+            description: description.into(),
+        }
     }
 }
 
@@ -39,7 +42,10 @@ pub enum Error {
     Geometry(GeometryError),
     /// Admission control: the server is at capacity; retry after the given delay.
     #[error("server at capacity ({capacity} frames in flight); retry in {retry_after:?}")]
-    Overloaded { capacity: usize, retry_after: Duration },
+    Overloaded {
+        capacity: usize,
+        retry_after: Duration,
+    },
     /// The caller's deadline passed before the frame was computed.
     #[error("the deadline passed before the frame was processed")]
     DeadlineExceeded,
@@ -69,10 +75,19 @@ pub enum Error {
     PlyMissingProperty { element: String, property: String },
     /// A PLY property has a type this reader cannot use for its role.
     #[error("PLY element `{element}`, property `{property}`: {reason}")]
-    PlyUnsupportedProperty { element: String, property: String, reason: String },
+    PlyUnsupportedProperty {
+        element: String,
+        property: String,
+        reason: String,
+    },
     /// PLY body data is malformed or truncated.
     #[error("PLY data, {element} {index}, property `{property}`: {reason}")]
-    PlyData { element: String, index: usize, property: String, reason: String },
+    PlyData {
+        element: String,
+        index: usize,
+        property: String,
+        reason: String,
+    },
 }
 
 impl Error {
@@ -83,7 +98,10 @@ impl Error {
 
     /// A bad configuration key.
     pub fn config(key: impl Into<String>, reason: impl Into<String>) -> Self {
-        Self::Config { key: key.into(), reason: reason.into() }
+        Self::Config {
+            key: key.into(),
+            reason: reason.into(),
+        }
     }
 }
 

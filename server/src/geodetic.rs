@@ -52,7 +52,11 @@ pub fn ecef_to_geodetic(p: [f64; 3]) -> Geodetic {
     for _ in 0..10 {
         let s = lat.sin();
         let n = A / (1.0 - E2 * s * s).sqrt();
-        h = if lat.cos().abs() > 1e-10 { r / lat.cos() - n } else { z.abs() - n * (1.0 - E2) };
+        h = if lat.cos().abs() > 1e-10 {
+            r / lat.cos() - n
+        } else {
+            z.abs() - n * (1.0 - E2)
+        };
         let next = z.atan2(r * (1.0 - E2 * n / (n + h)));
         let done = (next - lat).abs() < 1e-14;
         lat = next;
@@ -60,14 +64,22 @@ pub fn ecef_to_geodetic(p: [f64; 3]) -> Geodetic {
             break;
         }
     }
-    Geodetic { latitude_deg: lat.to_degrees(), longitude_deg: lon.to_degrees(), altitude_m: h }
+    Geodetic {
+        latitude_deg: lat.to_degrees(),
+        longitude_deg: lon.to_degrees(),
+        altitude_m: h,
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    const ZURICH: Geodetic = Geodetic { latitude_deg: 47.3769, longitude_deg: 8.5417, altitude_m: 408.0 };
+    const ZURICH: Geodetic = Geodetic {
+        latitude_deg: 47.3769,
+        longitude_deg: 8.5417,
+        altitude_m: 408.0,
+    };
 
     #[test]
     fn origin_maps_to_itself() {
@@ -81,14 +93,35 @@ mod tests {
     fn ecef_round_trip() {
         for g in [
             ZURICH,
-            Geodetic { latitude_deg: -33.9, longitude_deg: 151.2, altitude_m: -20.0 },
-            Geodetic { latitude_deg: 89.9, longitude_deg: -179.0, altitude_m: 3000.0 },
-            Geodetic { latitude_deg: 0.0, longitude_deg: 0.0, altitude_m: 0.0 },
+            Geodetic {
+                latitude_deg: -33.9,
+                longitude_deg: 151.2,
+                altitude_m: -20.0,
+            },
+            Geodetic {
+                latitude_deg: 89.9,
+                longitude_deg: -179.0,
+                altitude_m: 3000.0,
+            },
+            Geodetic {
+                latitude_deg: 0.0,
+                longitude_deg: 0.0,
+                altitude_m: 0.0,
+            },
         ] {
             let back = ecef_to_geodetic(geodetic_to_ecef(g));
-            assert!((back.latitude_deg - g.latitude_deg).abs() < 1e-9, "{g:?} {back:?}");
-            assert!((back.longitude_deg - g.longitude_deg).abs() < 1e-9, "{g:?} {back:?}");
-            assert!((back.altitude_m - g.altitude_m).abs() < 1e-4, "{g:?} {back:?}");
+            assert!(
+                (back.latitude_deg - g.latitude_deg).abs() < 1e-9,
+                "{g:?} {back:?}"
+            );
+            assert!(
+                (back.longitude_deg - g.longitude_deg).abs() < 1e-9,
+                "{g:?} {back:?}"
+            );
+            assert!(
+                (back.altitude_m - g.altitude_m).abs() < 1e-4,
+                "{g:?} {back:?}"
+            );
         }
     }
 
@@ -107,7 +140,10 @@ mod tests {
         let expected_dlon = (1000.0 / ((n + ZURICH.altitude_m) * lat.cos())).to_degrees();
         assert!((east.longitude_deg - ZURICH.longitude_deg - expected_dlon).abs() < 1e-6);
         // Moving along the tangent plane rises above the curved ellipsoid: about d^2 / 2R.
-        assert!((east.altitude_m - ZURICH.altitude_m - 0.0785).abs() < 0.01, "{east:?}");
+        assert!(
+            (east.altitude_m - ZURICH.altitude_m - 0.0785).abs() < 0.01,
+            "{east:?}"
+        );
         let up = enu_to_geodetic(ZURICH, [0.0, 0.0, 50.0]);
         assert!((up.altitude_m - ZURICH.altitude_m - 50.0).abs() < 1e-6);
     }

@@ -11,7 +11,7 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
 use crate::Error;
 use crate::geodetic::{Geodetic, enu_to_geodetic};
-use crate::segmentation::Segmenter;
+use crate::segmentation::{self, Segmenter};
 
 /// Where the point classes of a frame come from. `Auto` is the proto's UNSPECIFIED.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -43,7 +43,12 @@ pub enum ImagePixels {
     /// PNG or JPEG bytes; `format` is "png" or "jpeg".
     Encoded { format: String, data: Vec<u8> },
     /// Packed RGB8 rows.
-    Rgb8 { width: u32, height: u32, step: u32, data: Vec<u8> },
+    Rgb8 {
+        width: u32,
+        height: u32,
+        step: u32,
+        data: Vec<u8>,
+    },
 }
 
 /// Pinhole intrinsics: `u = fx * x / z + cx`, `v = fy * y / z + cy`.
@@ -151,11 +156,18 @@ impl std::fmt::Debug for Pipeline {
 impl Pipeline {
     /// A pipeline without a model, using `defaults` for unset options.
     pub fn geometry_only(defaults: Params) -> Self {
-        Self { defaults, segmenter: None }
+        Self {
+            defaults,
+            segmenter: None,
+        }
     }
 
     /// Resolves `Auto` for this frame, and checks that the chosen mode has what it needs.
-    pub fn resolve_mode(&self, frame: &Frame, requested: SegmentationMode) -> Result<SegmentationMode, Error> {
+    pub fn resolve_mode(
+        &self,
+        frame: &Frame,
+        requested: SegmentationMode,
+    ) -> Result<SegmentationMode, Error> {
         match requested {
             SegmentationMode::Auto => Ok(if frame.image.is_some() && self.segmenter.is_some() {
                 SegmentationMode::Model
@@ -172,7 +184,9 @@ impl Pipeline {
                     ));
                 }
                 if self.segmenter.is_none() {
-                    return Err(Error::ModelUnavailable("this server has no segmentation model loaded".into()));
+                    return Err(Error::ModelUnavailable(
+                        "this server has no segmentation model loaded".into(),
+                    ));
                 }
                 Ok(SegmentationMode::Model)
             }
@@ -192,22 +206,35 @@ impl Pipeline {
 
 /// Runs the whole pipeline on one frame: classes (per the mode), world transform, geometry,
 /// and world/geodetic results. Blocking and CPU-bound: call it from a worker thread.
-pub fn run_pipeline(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<FrameOutput, Error> {
+pub fn run_pipeline(
+    frame: &Frame,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+) -> Result<FrameOutput, Error> {
     let start = Instant::now();
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
 
     let world = to_world(&frame.cloud);
+    // Every image is decoded, so that a bad one is reported whatever the mode.
+    let decoded = match &frame.image {
+        Some(image) => {
+            let t = Instant::now();
+            let rgb = segmentation::decode(image)?;
+            timings.decode = Some(t.elapsed());
+            Some((image, rgb))
+        }
+        None => None,
+    };
     let model_classes;
     let classes: Option<&[u8]> = match mode {
         SegmentationMode::Model => {
-            let (image, segmenter) = match (&frame.image, &pipeline.segmenter) {
-                (Some(image), Some(segmenter)) => (image, segmenter),
+            let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
+                (Some(d), Some(segmenter)) => (d, segmenter),
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out = segmenter.classify(image, &world)?;
-            timings.decode = Some(out.decode);
+            let out = segmenter.classify(camera, rgb, &world)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             model_classes = out.classes;
@@ -253,7 +280,7 @@ pub fn run_pipeline(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) 
         timestamp: frame.timestamp,
         sites,
         segmentation_mode: mode,
-        point_count: detection.point_count,
+        point_count: world.len(),
         triangle_count: detection.triangle_count,
         timings,
     })
@@ -298,7 +325,11 @@ mod tests {
             drone_id: "d1".into(),
             sequence: 7,
             timestamp: None,
-            cloud: Cloud { points, classes, pose: Isometry3::identity() },
+            cloud: Cloud {
+                points,
+                classes,
+                pose: Isometry3::identity(),
+            },
             image: None,
             geodetic_origin: None,
         }
@@ -322,17 +353,28 @@ mod tests {
             pose: pose([10.0, 0.0, 5.0], [0.0, 0.0, h, h]).unwrap(),
         };
         let w = to_world(&cloud)[0];
-        assert!((w[0] - 10.0).abs() < 1e-5 && (w[1] - 1.0).abs() < 1e-5 && (w[2] - 5.0).abs() < 1e-5, "{w:?}");
+        assert!(
+            (w[0] - 10.0).abs() < 1e-5 && (w[1] - 1.0).abs() < 1e-5 && (w[2] - 5.0).abs() < 1e-5,
+            "{w:?}"
+        );
     }
 
     #[test]
     fn auto_mode_resolves_by_what_the_frame_has() {
         let p = Pipeline::default();
         let with_classes = frame(vec![], Some(vec![]));
-        assert_eq!(p.resolve_mode(&with_classes, SegmentationMode::Auto), Ok(SegmentationMode::PointClasses));
+        assert_eq!(
+            p.resolve_mode(&with_classes, SegmentationMode::Auto),
+            Ok(SegmentationMode::PointClasses)
+        );
         let bare = frame(vec![], None);
-        assert_eq!(p.resolve_mode(&bare, SegmentationMode::Auto), Ok(SegmentationMode::None));
-        let e = p.resolve_mode(&bare, SegmentationMode::PointClasses).unwrap_err();
+        assert_eq!(
+            p.resolve_mode(&bare, SegmentationMode::Auto),
+            Ok(SegmentationMode::None)
+        );
+        let e = p
+            .resolve_mode(&bare, SegmentationMode::PointClasses)
+            .unwrap_err();
         assert!(e.to_string().contains("frame.point_cloud.fields"), "{e}");
         let e = p.resolve_mode(&bare, SegmentationMode::Model).unwrap_err();
         assert!(e.to_string().contains("frame.image"), "{e}");
@@ -340,8 +382,12 @@ mod tests {
 
     #[test]
     fn pipeline_echoes_identity_and_mode() {
-        let out = run_pipeline(&frame(vec![[0.0, 0.0, 0.0]; 3], None), &FrameOptions::default(), &Pipeline::default())
-            .unwrap();
+        let out = run_pipeline(
+            &frame(vec![[0.0, 0.0, 0.0]; 3], None),
+            &FrameOptions::default(),
+            &Pipeline::default(),
+        )
+        .unwrap();
         assert_eq!((out.drone_id.as_str(), out.sequence), ("d1", 7));
         assert_eq!(out.segmentation_mode, SegmentationMode::None);
         assert!(out.timings.total.is_some());

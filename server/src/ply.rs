@@ -180,7 +180,10 @@ struct VertexLayout {
 const MAX_COUNT: usize = 1 << 31;
 
 fn header_error(line: usize, reason: impl Into<String>) -> Error {
-    Error::PlyHeader { line, reason: reason.into() }
+    Error::PlyHeader {
+        line,
+        reason: reason.into(),
+    }
 }
 
 fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
@@ -202,7 +205,10 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
         let words: Vec<&str> = line.split_whitespace().collect();
         if line_no == 1 {
             if line != "ply" {
-                return Err(header_error(1, format!("expected the magic `ply`, found `{line}`")));
+                return Err(header_error(
+                    1,
+                    format!("expected the magic `ply`, found `{line}`"),
+                ));
             }
             continue;
         }
@@ -210,10 +216,16 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
             None | Some("comment") | Some("obj_info") => {}
             Some("format") => {
                 if words.len() != 3 {
-                    return Err(header_error(line_no, format!("malformed format line `{line}`")));
+                    return Err(header_error(
+                        line_no,
+                        format!("malformed format line `{line}`"),
+                    ));
                 }
                 if words[2] != "1.0" {
-                    return Err(header_error(line_no, format!("unsupported PLY version `{}`", words[2])));
+                    return Err(header_error(
+                        line_no,
+                        format!("unsupported PLY version `{}`", words[2]),
+                    ));
                 }
                 format = Some(match words[1] {
                     "ascii" => Format::Ascii,
@@ -232,15 +244,28 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
             }
             Some("element") => {
                 if words.len() != 3 {
-                    return Err(header_error(line_no, format!("malformed element line `{line}`")));
+                    return Err(header_error(
+                        line_no,
+                        format!("malformed element line `{line}`"),
+                    ));
                 }
                 let count: usize = words[2].parse().map_err(|_| {
-                    header_error(line_no, format!("element `{}` has a bad count `{}`", words[1], words[2]))
+                    header_error(
+                        line_no,
+                        format!("element `{}` has a bad count `{}`", words[1], words[2]),
+                    )
                 })?;
                 if count > MAX_COUNT {
-                    return Err(header_error(line_no, format!("element `{}` count {count} is too large", words[1])));
+                    return Err(header_error(
+                        line_no,
+                        format!("element `{}` count {count} is too large", words[1]),
+                    ));
                 }
-                elements.push(Element { name: words[1].to_owned(), count, properties: Vec::new() });
+                elements.push(Element {
+                    name: words[1].to_owned(),
+                    count,
+                    properties: Vec::new(),
+                });
             }
             Some("property") => {
                 let Some(element) = elements.last_mut() else {
@@ -249,32 +274,73 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
                 let (kind, name) = match words.as_slice() {
                     ["property", "list", count, item, name] => {
                         let count_t = Scalar::parse(count).ok_or_else(|| {
-                            header_error(line_no, format!("property `{name}` has an unsupported list count type `{count}`"))
+                            header_error(
+                                line_no,
+                                format!(
+                                    "property `{name}` has an unsupported list count type `{count}`"
+                                ),
+                            )
                         })?;
                         if !count_t.is_integer() {
-                            return Err(header_error(line_no, format!("property `{name}` has a non-integer list count type `{count}`")));
+                            return Err(header_error(
+                                line_no,
+                                format!(
+                                    "property `{name}` has a non-integer list count type `{count}`"
+                                ),
+                            ));
                         }
                         let item_t = Scalar::parse(item).ok_or_else(|| {
-                            header_error(line_no, format!("property `{name}` has an unsupported list item type `{item}`"))
+                            header_error(
+                                line_no,
+                                format!(
+                                    "property `{name}` has an unsupported list item type `{item}`"
+                                ),
+                            )
                         })?;
-                        (PropertyKind::List { count: count_t, item: item_t }, *name)
+                        (
+                            PropertyKind::List {
+                                count: count_t,
+                                item: item_t,
+                            },
+                            *name,
+                        )
                     }
                     ["property", ty, name] => {
                         let t = Scalar::parse(ty).ok_or_else(|| {
-                            header_error(line_no, format!("property `{name}` has an unsupported type `{ty}`"))
+                            header_error(
+                                line_no,
+                                format!("property `{name}` has an unsupported type `{ty}`"),
+                            )
                         })?;
                         (PropertyKind::Scalar(t), *name)
                     }
-                    _ => return Err(header_error(line_no, format!("malformed property line `{line}`"))),
+                    _ => {
+                        return Err(header_error(
+                            line_no,
+                            format!("malformed property line `{line}`"),
+                        ));
+                    }
                 };
                 if element.properties.iter().any(|p| p.name == name) {
-                    return Err(header_error(line_no, format!("property `{name}` is declared twice in element `{}`", element.name)));
+                    return Err(header_error(
+                        line_no,
+                        format!(
+                            "property `{name}` is declared twice in element `{}`",
+                            element.name
+                        ),
+                    ));
                 }
-                element.properties.push(Property { name: name.to_owned(), kind });
+                element.properties.push(Property {
+                    name: name.to_owned(),
+                    kind,
+                });
             }
             Some("end_header") => break,
             Some(other) => {
-                return Err(header_error(line_no, format!("unknown header keyword `{other}`")));
+                return Err(header_error(
+                    line_no,
+                    format!("unknown header keyword `{other}`"),
+                ));
             }
         }
     }
@@ -342,7 +408,12 @@ fn push_vertex(
     for (k, &i) in layout.xyz.iter().enumerate() {
         let v = values[i];
         if !v.is_finite() {
-            return Err(data_error(element, index, &element.properties[i].name, format!("value {v} is not finite")));
+            return Err(data_error(
+                element,
+                index,
+                &element.properties[i].name,
+                format!("value {v} is not finite"),
+            ));
         }
         p[k] = v as f32;
     }
@@ -350,7 +421,12 @@ fn push_vertex(
     if let (Some(i), Some(classes)) = (layout.class, out.classes.as_mut()) {
         let v = values[i];
         if !(0.0..=255.0).contains(&v) {
-            return Err(data_error(element, index, &element.properties[i].name, format!("class {v} is outside 0..=255")));
+            return Err(data_error(
+                element,
+                index,
+                &element.properties[i].name,
+                format!("class {v} is outside 0..=255"),
+            ));
         }
         classes.push(v as u8);
     }
@@ -379,20 +455,35 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
     for (ei, element) in header.elements.iter().enumerate() {
         for index in 0..element.count {
             let line = lines.next().ok_or_else(|| {
-                data_error(element, index, "", format!("the file ends after {index} of {} rows", element.count))
+                data_error(
+                    element,
+                    index,
+                    "",
+                    format!("the file ends after {index} of {} rows", element.count),
+                )
             })?;
             let mut words = line.split_whitespace();
             values.clear();
             for property in &element.properties {
                 let mut next = |t: Scalar| -> Result<f64, Error> {
-                    let word = words
-                        .next()
-                        .ok_or_else(|| data_error(element, index, &property.name, "the row has too few values"))?;
+                    let word = words.next().ok_or_else(|| {
+                        data_error(element, index, &property.name, "the row has too few values")
+                    })?;
                     let v: f64 = word.parse().map_err(|_| {
-                        data_error(element, index, &property.name, format!("`{word}` is not a number"))
+                        data_error(
+                            element,
+                            index,
+                            &property.name,
+                            format!("`{word}` is not a number"),
+                        )
                     })?;
                     if t.is_integer() && v.fract() != 0.0 {
-                        return Err(data_error(element, index, &property.name, format!("`{word}` is not an integer")));
+                        return Err(data_error(
+                            element,
+                            index,
+                            &property.name,
+                            format!("`{word}` is not an integer"),
+                        ));
                     }
                     Ok(v)
                 };
@@ -401,7 +492,12 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
                     PropertyKind::List { count, item } => {
                         let n = next(count)?;
                         if n < 0.0 {
-                            return Err(data_error(element, index, &property.name, format!("negative list length {n}")));
+                            return Err(data_error(
+                                element,
+                                index,
+                                &property.name,
+                                format!("negative list length {n}"),
+                            ));
                         }
                         for _ in 0..n as usize {
                             next(item)?;
@@ -411,7 +507,12 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
                 }
             }
             if words.next().is_some() {
-                return Err(data_error(element, index, "", "the row has more values than the element has properties"));
+                return Err(data_error(
+                    element,
+                    index,
+                    "",
+                    "the row has more values than the element has properties",
+                ));
             }
             if ei == vertex_index {
                 push_vertex(element, index, &layout, &values, &mut cloud)?;
@@ -442,7 +543,10 @@ fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
                             element,
                             index,
                             &property.name,
-                            format!("truncated data: the file ends at byte {} of the body", body.len()),
+                            format!(
+                                "truncated data: the file ends at byte {} of the body",
+                                body.len()
+                            ),
                         )
                     })?;
                     pos += size;
@@ -453,11 +557,21 @@ fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
                     PropertyKind::List { count, item } => {
                         let n = take(count)?;
                         if n < 0.0 {
-                            return Err(data_error(element, index, &property.name, format!("negative list length {n}")));
+                            return Err(data_error(
+                                element,
+                                index,
+                                &property.name,
+                                format!("negative list length {n}"),
+                            ));
                         }
                         let skip = (n as usize).saturating_mul(item.size());
                         if body.len().saturating_sub(pos) < skip {
-                            return Err(data_error(element, index, &property.name, "truncated data inside a list"));
+                            return Err(data_error(
+                                element,
+                                index,
+                                &property.name,
+                                "truncated data inside a list",
+                            ));
                         }
                         pos += skip;
                         values.push(0.0);
@@ -500,7 +614,10 @@ mod tests {
                     property float x\nelement face 1\nproperty list uchar int vertex_indices\n\
                     end_header\n3 2 1\n6 5 4\n9 8 7\n3 0 1 2\n";
         let cloud = parse(text.as_bytes()).unwrap();
-        assert_eq!(cloud.points, vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]);
+        assert_eq!(
+            cloud.points,
+            vec![[1.0, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 9.0]]
+        );
         assert_eq!(cloud.classes, None);
     }
 
@@ -558,13 +675,19 @@ mod tests {
     #[test]
     fn big_endian_is_rejected_clearly() {
         let e = err(b"ply\nformat binary_big_endian 1.0\nelement vertex 0\nend_header\n");
-        assert!(e.contains("line 2") && e.contains("binary_big_endian"), "{e}");
+        assert!(
+            e.contains("line 2") && e.contains("binary_big_endian"),
+            "{e}"
+        );
     }
 
     #[test]
     fn unsupported_type_names_property_and_line() {
         let e = err(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty half y\nend_header\n");
-        assert!(e.contains("line 5") && e.contains("`y`") && e.contains("half"), "{e}");
+        assert!(
+            e.contains("line 5") && e.contains("`y`") && e.contains("half"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -580,7 +703,10 @@ mod tests {
         let e = err(b"ply\nelement vertex 0\nend_header\n");
         assert!(e.contains("format"), "{e}");
         let e = err(b"ply\nformat ascii 1.0\nproperty float x\nend_header\n");
-        assert!(e.contains("line 3") && e.contains("before any element"), "{e}");
+        assert!(
+            e.contains("line 3") && e.contains("before any element"),
+            "{e}"
+        );
         let e = err(b"ply\nformat ascii 1.0\nelement vertex many\nend_header\n");
         assert!(e.contains("line 3") && e.contains("many"), "{e}");
         let e = err(b"ply\nformat ascii 1.0\nelement face 0\nend_header\n");
@@ -589,12 +715,16 @@ mod tests {
 
     #[test]
     fn truncated_binary_names_vertex_and_property() {
-        let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n\
+        let mut bytes =
+            b"ply\nformat binary_little_endian 1.0\nelement vertex 2\nproperty float x\n\
                           property float y\nproperty float z\nend_header\n"
-            .to_vec();
+                .to_vec();
         bytes.extend(le(&[1.0, 2.0, 3.0, 4.0]));
         let e = err(&bytes);
-        assert!(e.contains("vertex 1") && e.contains("`y`") && e.contains("truncated"), "{e}");
+        assert!(
+            e.contains("vertex 1") && e.contains("`y`") && e.contains("truncated"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -602,33 +732,51 @@ mod tests {
         let head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
                     property float z\nproperty uchar class\nend_header\n";
         let e = err(format!("{head}1 2 3 4\n").as_bytes());
-        assert!(e.contains("vertex 1") && e.contains("ends after 1 of 2"), "{e}");
+        assert!(
+            e.contains("vertex 1") && e.contains("ends after 1 of 2"),
+            "{e}"
+        );
         let e = err(format!("{head}1 2 3 4\n1 two 3 4\n").as_bytes());
-        assert!(e.contains("vertex 1") && e.contains("`y`") && e.contains("two"), "{e}");
+        assert!(
+            e.contains("vertex 1") && e.contains("`y`") && e.contains("two"),
+            "{e}"
+        );
         let e = err(format!("{head}1 2 3 4\n1 2 3\n").as_bytes());
-        assert!(e.contains("vertex 1") && e.contains("`class`") && e.contains("too few"), "{e}");
+        assert!(
+            e.contains("vertex 1") && e.contains("`class`") && e.contains("too few"),
+            "{e}"
+        );
         let e = err(format!("{head}1 2 3 4 5\n1 2 3 4\n").as_bytes());
         assert!(e.contains("vertex 0") && e.contains("more values"), "{e}");
         let e = err(format!("{head}1 2 3 4.5\n1 2 3 4\n").as_bytes());
         assert!(e.contains("`class`") && e.contains("not an integer"), "{e}");
         let e = err(format!("{head}1 2 3 4\n1 2 nan 4\n").as_bytes());
-        assert!(e.contains("vertex 1") && e.contains("`z`") && e.contains("not finite"), "{e}");
+        assert!(
+            e.contains("vertex 1") && e.contains("`z`") && e.contains("not finite"),
+            "{e}"
+        );
     }
 
     #[test]
     fn class_out_of_range_and_float_class_are_rejected() {
-        let e = err(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
-                      property float z\nproperty int class\nend_header\n0 0 0 300\n");
+        let e = err(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                      property float z\nproperty int class\nend_header\n0 0 0 300\n",
+        );
         assert!(e.contains("`class`") && e.contains("300"), "{e}");
-        let e = err(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
-                      property float z\nproperty float label\nend_header\n0 0 0 3\n");
+        let e = err(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n\
+                      property float z\nproperty float label\nend_header\n0 0 0 3\n",
+        );
         assert!(e.contains("`label`") && e.contains("integer"), "{e}");
     }
 
     #[test]
     fn list_coordinate_is_rejected() {
-        let e = err(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\n\
-                      property float y\nproperty float z\nend_header\n1 0 0 0\n");
+        let e = err(
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\n\
+                      property float y\nproperty float z\nend_header\n1 0 0 0\n",
+        );
         assert!(e.contains("`x`") && e.contains("list"), "{e}");
     }
 

@@ -1,1 +1,77 @@
-//! Placeholder: filled in by its issue.
+//! `landing-sim`: a procedural rooftop city and the drone's sensors, standing in for the paper's
+//! Unreal/AirSim testbed.
+//!
+//! A [`World`] is a grid of blocks of flat-roofed buildings with parapets and rooftop assets drawn
+//! from the paper's Table III (or with equal probabilities, for training worlds), generated from a
+//! seed. [`camera::render`] ray-casts an RGB image with a class label per pixel; the crate's
+//! [`dataset`] module writes image/label datasets for training the segmentation model.
+//!
+//! Classes are [`landing_geometry::SemanticClass`] ids everywhere.
+//!
+//! ```
+//! use landing_sim::{World, WorldConfig};
+//! use landing_sim::camera::{render, CameraConfig, Intrinsics};
+//! use landing_sim::flight::{view_of, ViewConfig};
+//! use rand::SeedableRng;
+//!
+//! let world = World::generate(42, &WorldConfig::default()).unwrap();
+//! let mut rng = rand::rngs::SmallRng::seed_from_u64(1);
+//! let view = view_of(&world, 0, &ViewConfig::default(), &mut rng);
+//! let intrinsics = Intrinsics::from_hfov(64, 48, 70.0).unwrap();
+//! let img = render(&world, &intrinsics, &view.camera, &CameraConfig::default(), 7);
+//! // Looking at a roof from 10-40 m up, the rooftop class is in view.
+//! let rooftop = landing_geometry::SemanticClass::BuildingRooftop as u8;
+//! assert!(img.labels.iter().any(|&l| l == rooftop));
+//! ```
+
+#![forbid(unsafe_code)]
+
+pub mod assets;
+pub mod camera;
+pub mod dataset;
+pub mod flight;
+pub mod lidar;
+pub mod math;
+pub mod recording;
+pub mod scene;
+pub mod truth;
+pub mod world;
+
+use std::path::Path;
+
+pub use assets::{AssetDistribution, AssetKind};
+pub use world::{Asset, Building, World, WorldConfig};
+
+/// Everything that can go wrong in this crate.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// A configuration value is out of range.
+    #[error("`{field}` = {value} is invalid: {reason}")]
+    InvalidConfig { field: &'static str, value: String, reason: &'static str },
+    /// Reading or writing a file failed.
+    #[error("{path}: {source}")]
+    Io { path: String, source: std::io::Error },
+    /// Encoding or decoding an image failed.
+    #[error("image codec: {0}")]
+    Image(String),
+    /// Writing or reading an MCAP recording failed.
+    #[error("mcap: {0}")]
+    Mcap(String),
+    /// A geometry routine (polylabel) failed.
+    #[error("geometry: {0}")]
+    Geometry(String),
+    /// A recorded message could not be decoded.
+    #[error("decoding `{what}`: {reason}")]
+    Decode { what: String, reason: String },
+}
+
+impl SimError {
+    pub(crate) fn invalid(field: &'static str, value: impl std::fmt::Display, reason: &'static str) -> Self {
+        SimError::InvalidConfig { field, value: value.to_string(), reason }
+    }
+
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        SimError::Io { path: path.display().to_string(), source }
+    }
+}

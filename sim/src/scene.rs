@@ -72,7 +72,10 @@ pub struct Prim {
     pub top_class: u8,
     /// Class of every other surface.
     pub side_class: u8,
+    /// Look of surfaces facing up.
     pub material: Material,
+    /// Look of every other surface.
+    pub side_material: Material,
     /// Index of the building it stands on or belongs to, or [`NO_PRIM`].
     pub building: u32,
     /// Index of the rooftop asset it belongs to, or [`NO_PRIM`].
@@ -85,8 +88,14 @@ impl Prim {
         if n.z > 0.7 { self.top_class } else { self.side_class }
     }
 
-    /// Axis-aligned bounds.
+    /// Axis-aligned bounds, padded by 1 mm so that grazing hits at rims are not culled.
     pub fn bounds(&self) -> (V3, V3) {
+        let pad = V3::new(1e-3, 1e-3, 1e-3);
+        let (lo, hi) = self.tight_bounds();
+        (lo - pad, hi + pad)
+    }
+
+    fn tight_bounds(&self) -> (V3, V3) {
         match self.shape {
             Shape::Box { c, h, cos, sin } => {
                 let ex = cos.abs() * h.x + sin.abs() * h.y;
@@ -318,8 +327,88 @@ pub struct Bvh {
 
 const LEAF_SIZE: usize = 2;
 
+/// Surface area of a box.
+fn area(lo: V3, hi: V3) -> f32 {
+    let e = (hi - lo).max(V3::default());
+    2.0 * (e.x * e.y + e.y * e.z + e.z * e.x)
+}
+
+const BINS: usize = 16;
+
+/// Binned surface-area-heuristic split of `idx`: reorders it and returns the split position, or
+/// `None` when a leaf is cheaper (only for small sets) . Falls back to a median split when all
+/// centroids coincide.
+fn sah_split(idx: &mut [u32], bounds: &[(V3, V3)], centroids: &[V3], clo: V3, chi: V3) -> Option<usize> {
+    let n = idx.len();
+    let mut best = (f32::INFINITY, 0usize, 0usize);
+    let mut node_lo = V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY);
+    let mut node_hi = -node_lo;
+    for &i in idx.iter() {
+        node_lo = node_lo.min(bounds[i as usize].0);
+        node_hi = node_hi.max(bounds[i as usize].1);
+    }
+    for axis in 0..3 {
+        let (a, b) = (clo.axis(axis), chi.axis(axis));
+        if b - a <= 1e-6 {
+            continue;
+        }
+        let scale = BINS as f32 / (b - a);
+        let bin_of = |i: u32| (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
+        let empty = (V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY), V3::new(f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY));
+        let mut bins = [(empty, 0usize); BINS];
+        for &i in idx.iter() {
+            let k = bin_of(i);
+            let (lo, hi) = bounds[i as usize];
+            bins[k].0 = (bins[k].0.0.min(lo), bins[k].0.1.max(hi));
+            bins[k].1 += 1;
+        }
+        let mut right_cost = [0.0f32; BINS];
+        let mut acc = empty;
+        let mut cnt = 0usize;
+        for k in (1..BINS).rev() {
+            acc = (acc.0.min(bins[k].0.0), acc.1.max(bins[k].0.1));
+            cnt += bins[k].1;
+            right_cost[k] = if cnt > 0 { area(acc.0, acc.1) * cnt as f32 } else { 0.0 };
+        }
+        let mut acc = empty;
+        let mut cnt = 0usize;
+        for k in 0..BINS - 1 {
+            acc = (acc.0.min(bins[k].0.0), acc.1.max(bins[k].0.1));
+            cnt += bins[k].1;
+            if cnt == 0 || cnt == n {
+                continue;
+            }
+            let cost = area(acc.0, acc.1) * cnt as f32 + right_cost[k + 1];
+            if cost < best.0 {
+                best = (cost, axis, k);
+            }
+        }
+    }
+    if !best.0.is_finite() {
+        // Identical centroids: split by count.
+        return Some(n / 2);
+    }
+    let leaf_cost = area(node_lo, node_hi) * n as f32;
+    if n <= 4 && best.0 / 1.0 + area(node_lo, node_hi) * 0.5 >= leaf_cost {
+        return None;
+    }
+    let (_, axis, k) = best;
+    let (a, b) = (clo.axis(axis), chi.axis(axis));
+    let scale = BINS as f32 / (b - a);
+    let mut left = 0usize;
+    for j in 0..n {
+        let i = idx[j];
+        let bin = (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
+        if bin <= k {
+            idx.swap(left, j);
+            left += 1;
+        }
+    }
+    Some(left)
+}
+
 impl Bvh {
-    /// Builds the tree (median split on the longest centroid axis).
+    /// Builds the tree (binned surface-area heuristic).
     pub fn build(prims: Vec<Prim>) -> Self {
         let bounds: Vec<(V3, V3)> = prims.iter().map(Prim::bounds).collect();
         let centroids: Vec<V3> = bounds.iter().map(|(a, b)| (*a + *b) * 0.5).collect();
@@ -358,20 +447,12 @@ impl Bvh {
                 nodes[ni].count = n as u32;
                 continue;
             }
-            let ext = chi - clo;
-            let axis = if ext.x >= ext.y && ext.x >= ext.z {
-                0
-            } else if ext.y >= ext.z {
-                1
-            } else {
-                2
+            let Some(mid) = sah_split(&mut order[start..end], &bounds, &centroids, clo, chi) else {
+                nodes[ni].first = start as u32;
+                nodes[ni].count = n as u32;
+                continue;
             };
-            let mid = start + n / 2;
-            order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
-                let ca = centroids[a as usize].axis(axis);
-                let cb = centroids[b as usize].axis(axis);
-                ca.total_cmp(&cb).then(a.cmp(&b))
-            });
+            let mid = start + mid;
             let left = nodes.len();
             nodes.push(Node { min: lo, max: hi, first: 0, count: 0 });
             nodes.push(Node { min: lo, max: hi, first: 0, count: 0 });
@@ -497,6 +578,7 @@ mod tests {
             top_class: 4,
             side_class: 3,
             material: Material { albedo: [0.5; 3], texture: Texture::Plain, salt: 0 },
+            side_material: Material { albedo: [0.5; 3], texture: Texture::Plain, salt: 0 },
             building: 0,
             asset: NO_PRIM,
         }

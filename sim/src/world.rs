@@ -330,9 +330,7 @@ fn building_prims(b: &Building, bi: u32, rng: &mut SmallRng, out: &mut Vec<Prim>
     let h = b.height_m as f32;
     let roof_class = SemanticClass::BuildingRooftop as u8;
     let wall_class = SemanticClass::BuildingWall as u8;
-    let mut body_mat = roof;
-    body_mat.salt = roof.salt;
-    // The body carries two looks: the renderer picks `wall` for side faces via `wall_salt`.
+    let body_mat = roof;
     out.push(Prim {
         shape: Shape::Box {
             c: V3::new((x0 + x1) / 2.0, (y0 + y1) / 2.0, h / 2.0),
@@ -343,28 +341,10 @@ fn building_prims(b: &Building, bi: u32, rng: &mut SmallRng, out: &mut Vec<Prim>
         top_class: roof_class,
         side_class: wall_class,
         material: body_mat,
+        side_material: wall,
         building: bi,
         asset: NO_PRIM,
     });
-    // Walls get their own thin skin primitives so they can have a facade look: four boxes
-    // 2 cm outside the body, below the roof.
-    let skin = 0.02f32;
-    let faces = [
-        (V3::new((x0 + x1) / 2.0, y0 - skin / 2.0, h / 2.0), V3::new((x1 - x0) / 2.0, skin / 2.0, h / 2.0 - 0.01)),
-        (V3::new((x0 + x1) / 2.0, y1 + skin / 2.0, h / 2.0), V3::new((x1 - x0) / 2.0, skin / 2.0, h / 2.0 - 0.01)),
-        (V3::new(x0 - skin / 2.0, (y0 + y1) / 2.0, h / 2.0), V3::new(skin / 2.0, (y1 - y0) / 2.0, h / 2.0 - 0.01)),
-        (V3::new(x1 + skin / 2.0, (y0 + y1) / 2.0, h / 2.0), V3::new(skin / 2.0, (y1 - y0) / 2.0, h / 2.0 - 0.01)),
-    ];
-    for (c, hh) in faces {
-        out.push(Prim {
-            shape: Shape::Box { c, h: hh, cos: 1.0, sin: 0.0 },
-            top_class: wall_class,
-            side_class: wall_class,
-            material: wall,
-            building: bi,
-            asset: NO_PRIM,
-        });
-    }
     let ph = b.parapet_height_m as f32;
     let pt = b.parapet_thickness_m as f32;
     if ph > 0.0 && pt > 0.0 {
@@ -382,6 +362,7 @@ fn building_prims(b: &Building, bi: u32, rng: &mut SmallRng, out: &mut Vec<Prim>
                 top_class: roof_class,
                 side_class: wall_class,
                 material: coping,
+                side_material: wall,
                 building: bi,
                 asset: NO_PRIM,
             });
@@ -516,6 +497,7 @@ impl Placer {
             top_class: self.class,
             side_class: self.class,
             material,
+            side_material: material,
             building: self.building,
             asset: self.asset,
         }
@@ -580,7 +562,8 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
         }
         AssetKind::SmallRooftopEntrance => {
             let looks = [[0.60, 0.55, 0.50], [0.50, 0.30, 0.24], [0.75, 0.74, 0.70]];
-            let m = material(rng, looks[rng.random_range(0..looks.len())], Texture::Plain);
+            let look = looks[rng.random_range(0..looks.len())];
+            let m = material(rng, look, Texture::Plain);
             out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
             // Roof slab overhang and a door on the +x side.
             let slab = material(rng, [0.4, 0.4, 0.42], Texture::Plain);
@@ -599,14 +582,11 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
             let wall = material(rng, wl, wt);
             let (rl, rt) = ROOF_LOOKS[rng.random_range(0..ROOF_LOOKS.len())];
             let roof = material(rng, rl, rt);
-            let mut body = p.cuboid(0.0, 0.0, hx, hy, 0.0, h, wall);
+            let mut body = p.cuboid(0.0, 0.0, hx, hy, 0.0, h, roof);
+            body.side_material = wall;
             body.top_class = SemanticClass::BuildingRooftop as u8;
             body.side_class = SemanticClass::BuildingWall as u8;
             out.push(body);
-            let mut top = p.cuboid(0.0, 0.0, hx - 0.05, hy - 0.05, h, h + 0.02, roof);
-            top.top_class = SemanticClass::BuildingRooftop as u8;
-            top.side_class = SemanticClass::BuildingWall as u8;
-            out.push(top);
         }
         AssetKind::AcUnit => {
             let m = metal(rng);
@@ -660,7 +640,8 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
         }
         AssetKind::EnclosedWaterTower => {
             let looks = [[0.70, 0.70, 0.68], [0.45, 0.32, 0.22], [0.40, 0.45, 0.42]];
-            let m = material(rng, looks[rng.random_range(0..looks.len())], Texture::Metal);
+            let look = looks[rng.random_range(0..looks.len())];
+            let m = material(rng, look, Texture::Metal);
             let base = material(rng, [0.5, 0.5, 0.5], Texture::Plain);
             out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, 0.6, base));
             out.push(p.cylinder(0.0, 0.0, hx * 0.98, 0.6, h - 0.6, m));
@@ -668,7 +649,8 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
         }
         AssetKind::Tarp => {
             let looks = [[0.15, 0.30, 0.65], [0.20, 0.45, 0.25], [0.55, 0.55, 0.50], [0.60, 0.40, 0.15]];
-            let m = material(rng, looks[rng.random_range(0..looks.len())], Texture::Plain);
+            let look = looks[rng.random_range(0..looks.len())];
+            let m = material(rng, look, Texture::Plain);
             out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
         }
         AssetKind::Vegetation => {

@@ -1,0 +1,923 @@
+//! The `landing` command line, callable in-process ([`run`]) so tests drive it like a user.
+//!
+//! Exit codes (also in `landing --help`):
+//!
+//! | code | meaning |
+//! |---|---|
+//! | 0 | success |
+//! | 1 | error (bad input file, protocol error, ...) |
+//! | 2 | usage error (bad flags) |
+//! | 3 | server unreachable (connection refused, TLS handshake failed, deadline) |
+//! | 4 | some frames failed (the server answered them with an error) |
+//! | 5 | load test integrity failure: a sent frame got no answer or more than one |
+//! | 6 | authentication refused (`UNAUTHENTICATED`/`PERMISSION_DENIED`) |
+
+use std::io::{IsTerminal, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use landing_proto::v1::{
+    Frame, FrameResult, LandingSite, OverflowPolicy, PipelineOptions, SegmentationMode,
+    ServiceInfo, StreamLandingSitesResponse, stream_landing_sites_response,
+};
+use serde_json::{Value, json};
+
+use crate::loadtest::{LoadTestConfig, LoadTestReport, run_load_test};
+use crate::recording::{RecordedFrame, ResultWriter, read_frames};
+use crate::render::{RenderConfig, render};
+use crate::{
+    ClientConfig, ClientError, FrameBuilder, FrameOutcome, LandingClient, PointCloudBuilder,
+    StreamConfig, StreamItem, TlsConfig, code_label, duration_from_proto,
+};
+
+/// Process exit codes of `landing`.
+pub mod exit {
+    /// Success.
+    pub const OK: u8 = 0;
+    /// Any other error.
+    pub const ERROR: u8 = 1;
+    /// Bad command line.
+    pub const USAGE: u8 = 2;
+    /// The server could not be reached.
+    pub const UNREACHABLE: u8 = 3;
+    /// Some frames were answered with an error.
+    pub const FRAMES_FAILED: u8 = 4;
+    /// A load test saw a frame unanswered or answered twice.
+    pub const INTEGRITY: u8 = 5;
+    /// The server refused the credentials.
+    pub const AUTH: u8 = 6;
+}
+
+const AFTER_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage, 3 server unreachable, 4 frames failed, \
+5 load-test integrity failure (a frame unanswered or answered twice), 6 authentication refused.";
+
+/// Client of the rooftop landing-site service.
+#[derive(Debug, Parser)]
+#[command(name = "landing", version, about, after_help = AFTER_HELP)]
+pub struct Cli {
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
+    /// Print machine-readable JSON instead of tables.
+    #[arg(long, global = true)]
+    pub json: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// How to reach the server; the same options as the server's TLS and auth settings.
+#[derive(Debug, Clone, Args)]
+pub struct ConnectionArgs {
+    /// Server URL (`https://` for TLS).
+    #[arg(long, global = true, env = "LANDING_SERVER", default_value = crate::DEFAULT_SERVER)]
+    pub server: String,
+    /// Bearer token.
+    #[arg(long, global = true, env = "LANDING_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// CA certificate (PEM) that signed the server's certificate.
+    #[arg(long, global = true)]
+    pub ca_cert: Option<PathBuf>,
+    /// Client certificate (PEM) for mutual TLS.
+    #[arg(long, global = true, requires = "client_key")]
+    pub client_cert: Option<PathBuf>,
+    /// Client key (PEM) for mutual TLS.
+    #[arg(long, global = true, requires = "client_cert")]
+    pub client_key: Option<PathBuf>,
+    /// Name to check the server certificate against, when it differs from the URL's host.
+    #[arg(long, global = true)]
+    pub tls_domain: Option<String>,
+    /// Seconds to wait for the connection.
+    #[arg(long, global = true, default_value_t = 5.0)]
+    pub connect_timeout: f64,
+    /// Deadline of each unary call, seconds.
+    #[arg(long, global = true, default_value_t = 60.0)]
+    pub timeout: f64,
+}
+
+/// The subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Server version, model, classes and default parameters.
+    Info,
+    /// Detect landing sites in one recorded frame or a PLY point cloud.
+    Detect(DetectArgs),
+    /// Stream a recording through the server and print each frame's ranked sites.
+    Replay(ReplayArgs),
+    /// Run concurrent streams for a fixed time and report throughput and latency.
+    Loadtest(LoadtestArgs),
+    /// Draw a frame's landing sites over its camera image and from above, as PNG.
+    Render(RenderArgs),
+}
+
+/// Pipeline options shared by the subcommands that send frames.
+#[derive(Debug, Clone, Args)]
+pub struct PipelineArgs {
+    /// Where point classes come from.
+    #[arg(long, value_enum, default_value_t = Segmentation::Auto)]
+    pub segmentation: Segmentation,
+    /// l_max: longest triangle edge, metres.
+    #[arg(long)]
+    pub max_triangle_edge: Option<f64>,
+    /// dot_min: minimum |n·z| of a triangle normal.
+    #[arg(long)]
+    pub min_normal_dot: Option<f64>,
+    /// z_min: triangles flatter than this bypass the normal test, metres.
+    #[arg(long)]
+    pub max_triangle_height: Option<f64>,
+    /// Polylabel precision, metres.
+    #[arg(long)]
+    pub polylabel_precision: Option<f64>,
+    /// Smallest safe radius to report, metres.
+    #[arg(long)]
+    pub min_safe_radius: Option<f64>,
+    /// At most this many sites per frame.
+    #[arg(long)]
+    pub max_sites: Option<u32>,
+}
+
+/// `--segmentation` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Segmentation {
+    /// The server decides: the model when the frame has an image.
+    Auto,
+    /// The server's segmentation model.
+    Model,
+    /// The classes carried by the point cloud (ground truth in recordings).
+    PointClasses,
+    /// Geometry only.
+    None,
+}
+
+impl PipelineArgs {
+    fn options(&self) -> PipelineOptions {
+        PipelineOptions {
+            max_triangle_edge_m: self.max_triangle_edge,
+            min_normal_dot: self.min_normal_dot,
+            max_triangle_height_m: self.max_triangle_height,
+            polylabel_precision_m: self.polylabel_precision,
+            min_safe_radius_m: self.min_safe_radius,
+            max_sites: self.max_sites,
+            segmentation_mode: match self.segmentation {
+                Segmentation::Auto => SegmentationMode::Unspecified,
+                Segmentation::Model => SegmentationMode::Model,
+                Segmentation::PointClasses => SegmentationMode::PointClasses,
+                Segmentation::None => SegmentationMode::None,
+            } as i32,
+            ..Default::default()
+        }
+    }
+}
+
+/// `landing detect`.
+#[derive(Debug, Clone, Args)]
+pub struct DetectArgs {
+    /// An MCAP recording (`.mcap`) or a PLY point cloud in world coordinates (`.ply`).
+    pub input: PathBuf,
+    /// Which frame of the recording (0-based).
+    #[arg(long, default_value_t = 0)]
+    pub frame: usize,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+}
+
+/// `landing replay`.
+#[derive(Debug, Clone, Args)]
+pub struct ReplayArgs {
+    /// The recording.
+    pub recording: PathBuf,
+    /// Write the answers as MCAP (`landing.v1.StreamLandingSitesResponse` on `/landing/results`).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the answers as JSON lines.
+    #[arg(long)]
+    pub jsonl: Option<PathBuf>,
+    /// Send at this many frames per second; default: as fast as the server answers.
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Replay only the first N frames.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// What the server does when frames arrive faster than it works.
+    #[arg(long, value_enum, default_value_t = Overflow::Block)]
+    pub overflow: Overflow,
+    /// Frames in flight at once.
+    #[arg(long, default_value_t = 4)]
+    pub window: usize,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+}
+
+/// `--overflow` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Overflow {
+    /// Back-pressure: the server reads no faster than it works.
+    Block,
+    /// Keep only the newest queued frame; older ones are skipped.
+    Latest,
+}
+
+impl Overflow {
+    fn policy(self) -> OverflowPolicy {
+        match self {
+            Self::Block => OverflowPolicy::Block,
+            Self::Latest => OverflowPolicy::Latest,
+        }
+    }
+}
+
+/// `landing loadtest`.
+#[derive(Debug, Clone, Args)]
+pub struct LoadtestArgs {
+    /// Recordings whose frames are replayed in a loop.
+    #[arg(required = true)]
+    pub recordings: Vec<PathBuf>,
+    /// Concurrent streams.
+    #[arg(long, default_value_t = 1)]
+    pub streams: usize,
+    /// Frames per second per stream; default: as fast as possible.
+    #[arg(long)]
+    pub rate: Option<f64>,
+    /// Seconds of sending.
+    #[arg(long, default_value_t = 10.0)]
+    pub duration: f64,
+    /// Frames in flight per stream.
+    #[arg(long, default_value_t = 2)]
+    pub window: usize,
+    /// What the server does when frames arrive faster than it works.
+    #[arg(long, value_enum, default_value_t = Overflow::Block)]
+    pub overflow: Overflow,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+}
+
+/// `landing render`.
+#[derive(Debug, Clone, Args)]
+pub struct RenderArgs {
+    /// The recording.
+    pub recording: PathBuf,
+    /// Which frame (0-based).
+    #[arg(long, default_value_t = 0)]
+    pub frame: usize,
+    /// Output PNG.
+    #[arg(long, default_value = "landing.png")]
+    pub out: PathBuf,
+    /// Draw this many best sites.
+    #[arg(long, default_value_t = 3)]
+    pub sites: usize,
+    #[command(flatten)]
+    pub pipeline: PipelineArgs,
+}
+
+/// A failure with the exit code it maps to.
+#[derive(Debug)]
+pub struct CliError {
+    /// One of [`exit`].
+    pub code: u8,
+    /// What to tell the user.
+    pub message: String,
+}
+
+impl From<ClientError> for CliError {
+    fn from(e: ClientError) -> Self {
+        let code = if e.is_unreachable() {
+            exit::UNREACHABLE
+        } else if matches!(e.code(), Some(tonic::Code::Unauthenticated | tonic::Code::PermissionDenied)) {
+            exit::AUTH
+        } else if matches!(e.code(), Some(tonic::Code::DeadlineExceeded)) {
+            exit::UNREACHABLE
+        } else {
+            exit::ERROR
+        };
+        let mut message = e.to_string();
+        if let ClientError::Status(f) = &e {
+            message = format!("server answered {f}");
+        }
+        Self { code, message }
+    }
+}
+
+fn usage(message: impl Into<String>) -> CliError {
+    CliError { code: exit::USAGE, message: message.into() }
+}
+
+/// Runs `landing` with `args` (the first is the program name), writing results to `out` and
+/// diagnostics to stderr. Returns the exit code.
+pub async fn run<I, T>(args: I, out: &mut (dyn Write + Send)) -> u8
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(c) => c,
+        Err(e) => {
+            use clap::error::ErrorKind;
+            return match e.kind() {
+                ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+                    let _ = write!(out, "{e}");
+                    exit::OK
+                }
+                _ => {
+                    eprint!("{e}");
+                    exit::USAGE
+                }
+            };
+        }
+    };
+    match execute(&cli, out).await {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("landing: {}", e.message);
+            e.code
+        }
+    }
+}
+
+/// Runs a parsed command line; `Ok` carries the exit code of a run that completed.
+pub async fn execute(cli: &Cli, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+    match &cli.command {
+        Command::Info => {
+            let client = connect(&cli.connection).await?;
+            let info = client.info().await?;
+            print_info(&info, cli.json, out)?;
+            Ok(exit::OK)
+        }
+        Command::Detect(a) => detect(cli, a, out).await,
+        Command::Replay(a) => replay(cli, a, out).await,
+        Command::Loadtest(a) => loadtest(cli, a, out).await,
+        Command::Render(a) => render_cmd(cli, a, out).await,
+    }
+}
+
+/// The client configuration described by the connection flags.
+pub fn client_config(c: &ConnectionArgs) -> Result<ClientConfig, CliError> {
+    let mut config = ClientConfig::new(c.server.clone());
+    config.token = c.token.clone().filter(|t| !t.is_empty());
+    if !(c.connect_timeout > 0.0 && c.connect_timeout.is_finite()) {
+        return Err(usage(format!("--connect-timeout {} must be positive", c.connect_timeout)));
+    }
+    if !(c.timeout > 0.0 && c.timeout.is_finite()) {
+        return Err(usage(format!("--timeout {} must be positive", c.timeout)));
+    }
+    config.connect_timeout = Duration::from_secs_f64(c.connect_timeout);
+    config.request_timeout = Some(Duration::from_secs_f64(c.timeout));
+    if c.ca_cert.is_some() || c.client_cert.is_some() || c.server.starts_with("https://") {
+        let mut tls = TlsConfig::from_files(c.ca_cert.as_deref(), c.client_cert.as_deref(), c.client_key.as_deref())?;
+        tls.domain_name = c.tls_domain.clone();
+        config.tls = Some(tls);
+    }
+    Ok(config)
+}
+
+async fn connect(c: &ConnectionArgs) -> Result<LandingClient, CliError> {
+    let config = client_config(c)?;
+    match LandingClient::connect(config).await {
+        Ok(client) => Ok(client),
+        Err(e @ ClientError::InvalidConfig { .. }) => Err(usage(e.to_string())),
+        Err(e) => Err(e.into()),
+    }
+}
+
+fn io(e: std::io::Error) -> CliError {
+    CliError { code: exit::ERROR, message: format!("cannot write output: {e}") }
+}
+
+fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
+    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if is_ply {
+        let ply = crate::ply::read_ply(path)?;
+        let mut builder = PointCloudBuilder::new(&ply.points).frame_id("world");
+        if let Some(c) = &ply.classes {
+            builder = builder.classes(c);
+        }
+        return Ok(FrameBuilder::new(0, builder.build()?).drone_id("landing-cli").build());
+    }
+    let frames = read_frames(path)?;
+    let n = frames.len();
+    frames
+        .into_iter()
+        .nth(index)
+        .map(|f| f.frame)
+        .ok_or_else(|| usage(format!("--frame {index} is out of range: the recording has {n} frames")))
+}
+
+async fn detect(cli: &Cli, a: &DetectArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+    let frame = load_frame(&a.input, a.frame)?;
+    let client = connect(&cli.connection).await?;
+    let result = client.detect_with(frame, Some(a.pipeline.options())).await?;
+    if cli.json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&result_json(&result)).unwrap_or_default()).map_err(io)?;
+    } else {
+        print_result(&result, out).map_err(io)?;
+    }
+    Ok(exit::OK)
+}
+
+async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+    if let Some(r) = a.rate
+        && !(r > 0.0 && r.is_finite())
+    {
+        return Err(usage(format!("--rate {r} must be positive")));
+    }
+    let mut frames = read_frames(&a.recording)?;
+    if let Some(l) = a.limit {
+        frames.truncate(l);
+    }
+    let client = connect(&cli.connection).await?;
+    let mut mcap = a.out.as_deref().map(ResultWriter::create).transpose()?;
+    let mut jsonl = match &a.jsonl {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).map_err(|e| ClientError::Io { path: p.display().to_string(), source: e })?,
+        )),
+        None => None,
+    };
+    let config = StreamConfig {
+        overflow_policy: a.overflow.policy(),
+        options: Some(a.pipeline.options()),
+        max_in_flight: a.window.max(1),
+    };
+    let summary = replay_frames(&client, &frames, config, a.rate, |rec, item| {
+        if cli.json {
+            writeln!(out, "{}", item_json(item))?;
+        } else {
+            print_item_row(item, out)?;
+        }
+        if let Some(w) = jsonl.as_mut() {
+            writeln!(w, "{}", item_json(item))?;
+        }
+        if let Some(w) = mcap.as_mut() {
+            w.write(rec.log_time_ns, &response_of(item)).map_err(std::io::Error::other)?;
+        }
+        Ok(())
+    })
+    .await?;
+    if let Some(w) = mcap {
+        w.finish()?;
+    }
+    if let Some(mut w) = jsonl {
+        w.flush().map_err(io)?;
+    }
+    let failed = summary.failed;
+    if !cli.json {
+        writeln!(
+            out,
+            "{} frames: {} ok, {} failed, {} skipped in {:.2} s",
+            summary.answered, summary.ok, summary.failed, summary.skipped, summary.elapsed_s
+        )
+        .map_err(io)?;
+    }
+    Ok(if failed > 0 { exit::FRAMES_FAILED } else { exit::OK })
+}
+
+/// Counts of a replay.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ReplaySummary {
+    pub answered: usize,
+    pub ok: usize,
+    pub failed: usize,
+    pub skipped: usize,
+    pub elapsed_s: f64,
+}
+
+/// Streams `frames` in order and calls `each` with every answer and the frame it answers.
+pub async fn replay_frames<F>(
+    client: &LandingClient,
+    frames: &[RecordedFrame],
+    config: StreamConfig,
+    rate: Option<f64>,
+    mut each: F,
+) -> Result<ReplaySummary, CliError>
+where
+    F: FnMut(&RecordedFrame, &StreamItem) -> std::io::Result<()>,
+{
+    let started = Instant::now();
+    let (mut sender, mut results) = client.open_stream(config);
+    let to_send: Vec<Frame> = frames.iter().map(|f| f.frame.clone()).collect();
+    let send = tokio::spawn(async move {
+        let mut ticker = rate.map(|r| tokio::time::interval(Duration::from_secs_f64(1.0 / r)));
+        for f in to_send {
+            if let Some(t) = ticker.as_mut() {
+                t.tick().await;
+            }
+            sender.send(f).await?;
+        }
+        Ok::<(), ClientError>(())
+    });
+    let by_seq: std::collections::HashMap<u64, &RecordedFrame> =
+        frames.iter().map(|f| (f.frame.sequence, f)).collect();
+    let progress = std::io::stderr().is_terminal();
+    let mut s = ReplaySummary::default();
+    while let Some(item) = results.next().await {
+        let item = item?;
+        s.answered += 1;
+        match &item.outcome {
+            FrameOutcome::Result(_) => s.ok += 1,
+            FrameOutcome::Error(_) => s.failed += 1,
+            FrameOutcome::Skipped { .. } => s.skipped += 1,
+        }
+        let rec = by_seq.get(&item.sequence).copied().unwrap_or(&frames[0]);
+        each(rec, &item).map_err(io)?;
+        if progress {
+            eprint!("\rreplay: {}/{} frames", s.answered, frames.len());
+        }
+    }
+    if progress {
+        eprintln!();
+    }
+    match send.await {
+        Ok(Ok(())) => {}
+        Ok(Err(e)) => return Err(e.into()),
+        Err(e) => return Err(CliError { code: exit::ERROR, message: format!("sender failed: {e}") }),
+    }
+    s.elapsed_s = started.elapsed().as_secs_f64();
+    Ok(s)
+}
+
+async fn loadtest(cli: &Cli, a: &LoadtestArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+    if !(a.duration > 0.0 && a.duration.is_finite()) {
+        return Err(usage(format!("--duration {} must be positive", a.duration)));
+    }
+    if a.streams == 0 {
+        return Err(usage("--streams must be at least 1"));
+    }
+    if let Some(r) = a.rate
+        && !(r > 0.0 && r.is_finite())
+    {
+        return Err(usage(format!("--rate {r} must be positive")));
+    }
+    let mut frames = Vec::new();
+    for r in &a.recordings {
+        frames.extend(read_frames(r)?.into_iter().map(|f| f.frame));
+    }
+    let client = connect(&cli.connection).await?;
+    let config = LoadTestConfig {
+        streams: a.streams,
+        rate_hz: a.rate,
+        duration: Duration::from_secs_f64(a.duration),
+        stream: StreamConfig {
+            overflow_policy: a.overflow.policy(),
+            options: Some(a.pipeline.options()),
+            max_in_flight: a.window.max(1),
+        },
+    };
+    let show = std::io::stderr().is_terminal();
+    let progress = move |answered: u64, elapsed: Duration| {
+        if show {
+            eprint!("\rloadtest: {answered} answers in {:.0} s", elapsed.as_secs_f64());
+        }
+    };
+    let report = run_load_test(&client, Arc::new(frames), &config, Some(&progress)).await?;
+    if show {
+        eprintln!();
+    }
+    if cli.json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&report).unwrap_or_default()).map_err(io)?;
+    } else {
+        print_load_report(&report, out).map_err(io)?;
+    }
+    Ok(if !report.exactly_once() {
+        exit::INTEGRITY
+    } else if report.failed() > 0 {
+        exit::FRAMES_FAILED
+    } else {
+        exit::OK
+    })
+}
+
+async fn render_cmd(cli: &Cli, a: &RenderArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+    let frame = load_frame(&a.recording, a.frame)?;
+    let client = connect(&cli.connection).await?;
+    let result = client.detect_with(frame.clone(), Some(a.pipeline.options())).await?;
+    let rendered = render(&frame, &result, &RenderConfig { max_sites: a.sites, ..RenderConfig::default() })?;
+    rendered.image.save(&a.out).map_err(|e| ClientError::Image {
+        what: a.out.display().to_string(),
+        reason: e.to_string(),
+    })?;
+    if cli.json {
+        let v = json!({ "out": a.out.display().to_string(), "width": rendered.image.width(),
+            "height": rendered.image.height(), "result": result_json(&result) });
+        writeln!(out, "{v}").map_err(io)?;
+    } else {
+        writeln!(
+            out,
+            "wrote {} ({}x{}, {} site(s) drawn)",
+            a.out.display(),
+            rendered.image.width(),
+            rendered.image.height(),
+            result.sites.len().min(a.sites)
+        )
+        .map_err(io)?;
+    }
+    Ok(exit::OK)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Output
+// ---------------------------------------------------------------------------------------------
+
+fn print_info(info: &ServiceInfo, as_json: bool, out: &mut (dyn Write + Send)) -> Result<(), CliError> {
+    if as_json {
+        writeln!(out, "{}", serde_json::to_string_pretty(&info_json(info)).unwrap_or_default()).map_err(io)?;
+        return Ok(());
+    }
+    let mut s = String::new();
+    use std::fmt::Write as _;
+    let _ = writeln!(s, "version            {}", info.version);
+    match &info.model {
+        Some(m) => {
+            let _ = writeln!(s, "model              {} ({}x{}, {})", m.name, m.input_width, m.input_height, m.execution_provider);
+            let _ = writeln!(s, "model sha256       {}", m.sha256);
+        }
+        None => {
+            let _ = writeln!(s, "model              none (geometry only)");
+        }
+    }
+    let _ = writeln!(s, "max request        {} bytes", info.max_request_bytes);
+    if let Some(o) = &info.default_options {
+        let _ = writeln!(s, "defaults");
+        for (k, v) in options_pairs(o) {
+            let _ = writeln!(s, "  {k:<24} {v}");
+        }
+    }
+    let _ = writeln!(s, "classes");
+    for c in &info.classes {
+        let _ = writeln!(s, "  {:>3}  {}", c.class, c.name);
+    }
+    out.write_all(s.as_bytes()).map_err(io)
+}
+
+fn options_pairs(o: &PipelineOptions) -> Vec<(&'static str, String)> {
+    let f = |v: Option<f64>| v.map_or("-".to_owned(), |v| format!("{v}"));
+    vec![
+        ("max_triangle_edge_m", f(o.max_triangle_edge_m)),
+        ("min_normal_dot", f(o.min_normal_dot)),
+        ("max_triangle_height_m", f(o.max_triangle_height_m)),
+        ("polylabel_precision_m", f(o.polylabel_precision_m)),
+        ("min_region_triangles", o.min_region_triangles.map_or("-".into(), |v| v.to_string())),
+        ("min_safe_radius_m", f(o.min_safe_radius_m)),
+        ("min_area_m2", f(o.min_area_m2)),
+        ("min_hole_area_m2", f(o.min_hole_area_m2)),
+        ("max_sites", o.max_sites.map_or("-".into(), |v| v.to_string())),
+        ("landable_classes", format!("{:?}", o.landable_classes)),
+        ("segmentation_mode", segmentation_name(o.segmentation_mode).to_owned()),
+    ]
+}
+
+fn segmentation_name(mode: i32) -> &'static str {
+    match SegmentationMode::try_from(mode) {
+        Ok(SegmentationMode::Model) => "model",
+        Ok(SegmentationMode::PointClasses) => "point_classes",
+        Ok(SegmentationMode::None) => "none",
+        _ => "unspecified",
+    }
+}
+
+fn info_json(info: &ServiceInfo) -> Value {
+    json!({
+        "version": info.version,
+        "model": info.model.as_ref().map(|m| json!({
+            "name": m.name, "sha256": m.sha256, "input_width": m.input_width,
+            "input_height": m.input_height, "execution_provider": m.execution_provider,
+        })),
+        "classes": info.classes.iter().map(|c| json!({"class": c.class, "name": c.name})).collect::<Vec<_>>(),
+        "default_options": info.default_options.as_ref().map(|o| {
+            options_pairs(o).into_iter().map(|(k, v)| (k.to_owned(), Value::String(v))).collect::<serde_json::Map<_, _>>()
+        }),
+        "max_request_bytes": info.max_request_bytes,
+    })
+}
+
+fn print_result(r: &FrameResult, out: &mut (dyn Write + Send)) -> std::io::Result<()> {
+    let total = r.timings.and_then(|t| t.total).and_then(duration_from_proto);
+    writeln!(
+        out,
+        "frame {} ({}): {} points, {} triangles, segmentation {}, {} site(s){}",
+        r.sequence,
+        if r.drone_id.is_empty() { "-" } else { &r.drone_id },
+        r.point_count,
+        r.triangle_count,
+        segmentation_name(r.segmentation_mode),
+        r.sites.len(),
+        total.map(|t| format!(", {:.1} ms", t.as_secs_f64() * 1e3)).unwrap_or_default()
+    )?;
+    if r.sites.is_empty() {
+        return Ok(());
+    }
+    writeln!(out, "{:>4}  {:>9}  {:>9}  {:>28}  {:>6}  {:>6}", "rank", "radius_m", "area_m2", "centre (x, y, z)", "holes", "points")?;
+    for s in &r.sites {
+        writeln!(out, "{}", site_row(s))?;
+    }
+    Ok(())
+}
+
+fn site_row(s: &LandingSite) -> String {
+    let c = s.center.unwrap_or_default();
+    format!(
+        "{:>4}  {:>9.2}  {:>9.1}  {:>28}  {:>6}  {:>6}",
+        s.rank,
+        s.safe_radius_m,
+        s.area_m2,
+        format!("({:.2}, {:.2}, {:.2})", c.x, c.y, c.z),
+        s.polygon.as_ref().map_or(0, |p| p.holes.len()),
+        s.point_count
+    )
+}
+
+fn print_item_row(item: &StreamItem, out: &mut (dyn Write + Send)) -> std::io::Result<()> {
+    let ms = item.latency.as_secs_f64() * 1e3;
+    match &item.outcome {
+        FrameOutcome::Result(r) => {
+            let best = r.sites.first();
+            writeln!(
+                out,
+                "frame {:>5}  ok       {:>2} site(s)  best r={:<6} at {:<26} {:>7.1} ms",
+                item.sequence,
+                r.sites.len(),
+                best.map_or("-".into(), |s| format!("{:.2}", s.safe_radius_m)),
+                best.and_then(|s| s.center).map_or("-".into(), |c| format!("({:.2}, {:.2}, {:.2})", c.x, c.y, c.z)),
+                ms
+            )
+        }
+        FrameOutcome::Error(e) => writeln!(out, "frame {:>5}  error    {e}", item.sequence),
+        FrameOutcome::Skipped { superseded_by } => {
+            writeln!(out, "frame {:>5}  skipped  (superseded by {superseded_by})", item.sequence)
+        }
+    }
+}
+
+fn print_load_report(r: &LoadTestReport, out: &mut (dyn Write + Send)) -> std::io::Result<()> {
+    writeln!(out, "streams            {}", r.streams)?;
+    writeln!(out, "rate per stream    {}", r.rate_hz_per_stream.map_or("max".into(), |v| format!("{v} Hz")))?;
+    writeln!(out, "elapsed            {:.2} s", r.elapsed_s)?;
+    writeln!(out, "sent / answered    {} / {}", r.sent, r.answered)?;
+    writeln!(out, "throughput         {:.2} frames/s", r.throughput_fps)?;
+    let p = r.latency_ms;
+    writeln!(out, "latency (ok)       p50 {:.1} ms  p95 {:.1} ms  p99 {:.1} ms  max {:.1} ms", p.p50, p.p95, p.p99, p.max)?;
+    writeln!(out, "mean sites/frame   {:.2}", r.mean_sites)?;
+    let outcomes: Vec<String> = r.outcomes.iter().map(|(k, v)| format!("{k} {v}")).collect();
+    writeln!(out, "outcomes           {}", outcomes.join(", "))?;
+    writeln!(
+        out,
+        "exactly once       {} (unanswered {}, unexpected {})",
+        if r.exactly_once() { "yes" } else { "NO" },
+        r.unanswered,
+        r.unexpected
+    )?;
+    for e in &r.stream_errors {
+        writeln!(out, "stream error       {e}")?;
+    }
+    Ok(())
+}
+
+/// The JSON form of a frame result (used by `--json` and JSON lines).
+pub fn result_json(r: &FrameResult) -> Value {
+    let ms = |d: Option<prost_types::Duration>| d.and_then(duration_from_proto).map(|d| d.as_secs_f64() * 1e3);
+    let t = r.timings.unwrap_or_default();
+    json!({
+        "drone_id": r.drone_id,
+        "sequence": r.sequence,
+        "segmentation_mode": segmentation_name(r.segmentation_mode),
+        "point_count": r.point_count,
+        "triangle_count": r.triangle_count,
+        "timings_ms": {
+            "queue": ms(t.queue), "decode": ms(t.decode), "segmentation": ms(t.segmentation),
+            "classification": ms(t.classification), "triangulation": ms(t.triangulation),
+            "triangle_filter": ms(t.triangle_filter), "plane_extraction": ms(t.plane_extraction),
+            "polygon_extraction": ms(t.polygon_extraction), "polylabel": ms(t.polylabel), "total": ms(t.total),
+        },
+        "sites": r.sites.iter().map(site_json).collect::<Vec<_>>(),
+    })
+}
+
+fn site_json(s: &LandingSite) -> Value {
+    let v3 = |v: Option<landing_proto::v1::Vector3>| v.map(|v| json!([v.x, v.y, v.z]));
+    let ring = |r: &landing_proto::v1::LinearRing| r.points.iter().map(|p| json!([p.x, p.y, p.z])).collect::<Vec<_>>();
+    json!({
+        "rank": s.rank,
+        "safe_radius_m": s.safe_radius_m,
+        "area_m2": s.area_m2,
+        "center": v3(s.center),
+        "center_geodetic": s.center_geodetic.map(|g| json!({"latitude_deg": g.latitude_deg, "longitude_deg": g.longitude_deg, "altitude_m": g.altitude_m})),
+        "normal": v3(s.normal),
+        "plane_height_m": s.polygon.as_ref().map(|p| p.plane_height_m),
+        "shell": s.polygon.as_ref().and_then(|p| p.shell.as_ref()).map(ring),
+        "holes": s.polygon.as_ref().map(|p| p.holes.iter().map(ring).collect::<Vec<_>>()),
+        "point_count": s.point_count,
+        "triangle_count": s.triangle_count,
+    })
+}
+
+/// The JSON line of one stream answer.
+pub fn item_json(item: &StreamItem) -> Value {
+    let mut v = json!({ "sequence": item.sequence, "outcome": item.outcome.label(), "latency_ms": item.latency.as_secs_f64() * 1e3 });
+    match &item.outcome {
+        FrameOutcome::Result(r) => v["result"] = result_json(r),
+        FrameOutcome::Error(e) => {
+            v["error"] = json!({
+                "code": code_label(e.code), "message": e.message,
+                "field_violations": e.field_violations.iter().map(|f| json!({"field": f.field, "description": f.description})).collect::<Vec<_>>(),
+                "retry_delay_ms": e.retry_delay.map(|d| d.as_secs_f64() * 1e3),
+            })
+        }
+        FrameOutcome::Skipped { superseded_by } => v["superseded_by"] = json!(superseded_by),
+    }
+    v
+}
+
+/// The wire form of one answer, for MCAP output.
+fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
+    use stream_landing_sites_response::Outcome;
+    let outcome = match &item.outcome {
+        FrameOutcome::Result(r) => Outcome::Result(r.clone()),
+        FrameOutcome::Skipped { superseded_by } => {
+            Outcome::Skipped(landing_proto::v1::FrameSkipped { superseded_by_sequence: *superseded_by })
+        }
+        FrameOutcome::Error(e) => Outcome::Error(landing_proto::google::rpc::Status {
+            code: e.code as i32,
+            message: e.message.clone(),
+            details: Vec::new(),
+        }),
+    };
+    StreamLandingSitesResponse { sequence: item.sequence, outcome: Some(outcome) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    async fn run_capture(args: &[&str]) -> (u8, String) {
+        let mut out = Vec::new();
+        let code = run(args.iter().copied(), &mut out).await;
+        (code, String::from_utf8(out).unwrap())
+    }
+
+    #[tokio::test]
+    async fn help_documents_exit_codes() {
+        let (code, out) = run_capture(&["landing", "--help"]).await;
+        assert_eq!(code, exit::OK);
+        assert!(out.contains("3 server unreachable"), "{out}");
+        for sub in ["info", "detect", "replay", "loadtest", "render"] {
+            assert!(out.contains(sub), "{sub} missing from help");
+        }
+    }
+
+    #[tokio::test]
+    async fn bad_flags_are_usage_errors() {
+        assert_eq!(run_capture(&["landing", "frobnicate"]).await.0, exit::USAGE);
+        assert_eq!(run_capture(&["landing", "loadtest"]).await.0, exit::USAGE);
+        assert_eq!(
+            run_capture(&["landing", "info", "--client-cert", "/x.pem"]).await.0,
+            exit::USAGE,
+            "a client cert without its key"
+        );
+        assert_eq!(run_capture(&["landing", "info", "--server", "ftp://x"]).await.0, exit::USAGE);
+    }
+
+    #[tokio::test]
+    async fn nothing_listening_is_exit_3() {
+        // Bind and drop to find a port with nothing behind it.
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let server = format!("http://127.0.0.1:{port}");
+        let (code, _) = run_capture(&["landing", "info", "--server", &server, "--connect-timeout", "2"]).await;
+        assert_eq!(code, exit::UNREACHABLE);
+    }
+
+    #[tokio::test]
+    async fn missing_input_file_is_exit_1() {
+        let (code, _) = run_capture(&["landing", "detect", "/nonexistent/frame.ply"]).await;
+        assert_eq!(code, exit::ERROR);
+    }
+
+    #[test]
+    fn pipeline_flags_become_options() {
+        let cli = Cli::try_parse_from([
+            "landing", "detect", "x.ply", "--segmentation", "point-classes", "--max-triangle-edge", "3.5", "--max-sites", "2",
+        ])
+        .unwrap();
+        let Command::Detect(a) = cli.command else { panic!("not detect") };
+        let o = a.pipeline.options();
+        assert_eq!(o.segmentation_mode, SegmentationMode::PointClasses as i32);
+        assert_eq!(o.max_triangle_edge_m, Some(3.5));
+        assert_eq!(o.max_sites, Some(2));
+        assert_eq!(o.min_normal_dot, None);
+    }
+
+    #[test]
+    fn item_json_carries_field_violations() {
+        let item = StreamItem {
+            sequence: 3,
+            outcome: FrameOutcome::Error(crate::FrameError {
+                code: tonic::Code::InvalidArgument,
+                message: "bad".into(),
+                field_violations: vec![crate::FieldViolation { field: "frame.point_cloud".into(), description: "missing".into() }],
+                retry_delay: None,
+            }),
+            latency: Duration::from_millis(2),
+        };
+        let v = item_json(&item);
+        assert_eq!(v["outcome"], "invalid_argument");
+        assert_eq!(v["error"]["field_violations"][0]["field"], "frame.point_cloud");
+        let r = response_of(&item);
+        assert!(matches!(r.outcome, Some(stream_landing_sites_response::Outcome::Error(ref s)) if s.code == 3));
+    }
+}

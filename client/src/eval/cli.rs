@@ -1,0 +1,151 @@
+//! The `landing eval` subcommand: arguments and the command itself.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+use landing_proto::v1::PipelineOptions;
+
+use super::report::{Mode, Targets, summarize, write_report};
+use super::run::{EvalConfig, fill_scanned_regions, run};
+use super::truth::load_scenarios;
+use crate::cli::{CliError, ConnectionArgs, client_config, exit};
+use crate::{ClientError, LandingClient};
+
+/// Exit code of `landing eval` when a gated mode returned an unsafe site (or answered no frame).
+pub const EXIT_UNSAFE: u8 = 7;
+
+/// `landing eval` arguments.
+#[derive(Debug, Clone, Args)]
+pub struct EvalArgs {
+    /// Recordings with ground truth (`landing-sim` MCAP files), or folders of them.
+    #[arg(required = true)]
+    pub recordings: Vec<PathBuf>,
+    /// Folder for summary.md, results.json and the PNG charts.
+    #[arg(long, default_value = "eval-out")]
+    pub out: PathBuf,
+    /// Modes to compare: geometry (no classes), model (the server's segmentation), truth (the
+    /// cloud's class field).
+    #[arg(long, value_delimiter = ',', default_value = "geometry,model,truth", value_parser = parse_mode)]
+    pub modes: Vec<Mode>,
+    /// Modes in which any unsafe site fails the run (exit code 7).
+    #[arg(long, value_delimiter = ',', default_value = "model", value_parser = parse_mode)]
+    pub gate: Vec<Mode>,
+    /// Evaluate at most this many frames (0: all), taken evenly across the recordings.
+    #[arg(long, default_value_t = 0)]
+    pub limit: usize,
+    /// Raster cell for areas and IoU, metres.
+    #[arg(long, default_value_t = 0.05)]
+    pub cell: f64,
+    /// Roofs whose true best radius is below this are not scored for IoU and radius, metres.
+    #[arg(long, default_value_t = 1.0)]
+    pub min_truth_radius: f64,
+    /// Polylabel precision sent with every frame (and used as the safety tolerance), metres.
+    /// Unset: the server's default.
+    #[arg(long)]
+    pub polylabel_precision: Option<f64>,
+    /// At most this many sites per frame. Unset: the server's default.
+    #[arg(long)]
+    pub max_sites: Option<u32>,
+    /// Also draw every frame top-down into `<out>/frames/` (frames with an unsafe site always are).
+    #[arg(long)]
+    pub overlays: bool,
+}
+
+fn parse_mode(s: &str) -> Result<Mode, String> {
+    Mode::parse(s).ok_or_else(|| format!("unknown mode `{s}` (expected geometry, model or truth)"))
+}
+
+/// Runs `landing eval`: prints the table (or JSON), writes the report folder, and returns
+/// [`EXIT_UNSAFE`] when a gated mode had an unsafe site or answered no frame.
+pub async fn eval_cmd(
+    connection: &ConnectionArgs,
+    args: &EvalArgs,
+    json: bool,
+    out: &mut (dyn Write + Send),
+) -> Result<u8, CliError> {
+    let usage = |m: String| CliError { code: exit::USAGE, message: m };
+    if !(args.cell > 0.0 && args.cell <= 1.0) {
+        return Err(usage(format!("--cell {} must be in (0, 1] metres", args.cell)));
+    }
+    let files = recording_files(&args.recordings)?;
+    let mut scenarios = load_scenarios(&files)?;
+    if args.limit > 0 && scenarios.len() > args.limit {
+        let step = scenarios.len() as f64 / args.limit as f64;
+        scenarios = (0..args.limit).map(|k| scenarios[(k as f64 * step) as usize].clone()).collect();
+    }
+    let config = EvalConfig {
+        modes: args.modes.clone(),
+        options: PipelineOptions {
+            polylabel_precision_m: args.polylabel_precision,
+            max_sites: args.max_sites,
+            ..Default::default()
+        },
+        metrics: super::MetricsParams {
+            cell_m: args.cell,
+            min_truth_radius_m: args.min_truth_radius,
+            ..Default::default()
+        },
+        overlay_dir: Some(args.out.join("frames")),
+        overlay_all: args.overlays,
+        ..Default::default()
+    };
+    for s in &mut scenarios {
+        fill_scanned_regions(s, config.roof_band_m)?;
+    }
+    let client = LandingClient::connect(client_config(connection)?).await?;
+    let (records, failures) = run(&client, &scenarios, &config, |done, total| {
+        if done % 10 == 0 || done == total {
+            eprintln!("landing eval: {done}/{total} frames");
+        }
+    })
+    .await?;
+    let summary = summarize(&records, &failures, &args.modes);
+    let targets = Targets::default();
+    let md = write_report(&args.out, &summary, &records, &targets, &args.gate)?;
+    let io = |e: std::io::Error| CliError { code: exit::ERROR, message: format!("cannot write output: {e}") };
+    if json {
+        let v = serde_json::to_string_pretty(&summary).map_err(|e| CliError { code: exit::ERROR, message: e.to_string() })?;
+        writeln!(out, "{v}").map_err(io)?;
+    } else {
+        write!(out, "{}", summary.to_text()).map_err(io)?;
+        for &mode in &args.gate {
+            for (line, ok) in summary.target_lines(mode, &targets) {
+                writeln!(out, "{} {line}", if ok { "PASS" } else { "FAIL" }).map_err(io)?;
+            }
+        }
+        writeln!(out, "report: {}", args.out.join("summary.md").display()).map_err(io)?;
+    }
+    let _ = md;
+    let gate_failed = args.gate.iter().any(|g| {
+        summary.modes.iter().find(|m| m.mode == *g).is_none_or(|m| m.unsafe_sites() > 0 || m.frames == 0)
+    });
+    Ok(if gate_failed { EXIT_UNSAFE } else { exit::OK })
+}
+
+/// The MCAP files named, with folders expanded to their `*.mcap` files in name order.
+pub fn recording_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, ClientError> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| ClientError::Io { path: p.display().to_string(), source: e })?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    if out.is_empty() {
+        return Err(ClientError::InvalidInput { field: "recordings", reason: format!("no .mcap files in {paths:?}") });
+    }
+    Ok(out)
+}
+
+/// File name of `path` for scenario names.
+pub(crate) fn short_name(path: &Path) -> String {
+    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+}

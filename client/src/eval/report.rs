@@ -1,0 +1,557 @@
+//! Aggregation of per-frame scores into the evaluation's summary, and its renderings: a terminal
+//! table, a Markdown report, and the PNG charts.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use serde::Serialize;
+
+use super::metrics::{FrameEval, Verdict};
+use super::plot::{BarGroup, bars_log, box_plot};
+use super::stats::{MeanCi, bootstrap_ci95, mean_ci95, median};
+use crate::ClientError;
+
+/// Where the point classes come from: the three modes the evaluation compares.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// `SEGMENTATION_MODE_NONE`: geometry only.
+    Geometry,
+    /// `SEGMENTATION_MODE_MODEL`: the server's segmentation model on the camera image.
+    Model,
+    /// `SEGMENTATION_MODE_POINT_CLASSES`: the cloud's true classes (the upper bound).
+    Truth,
+}
+
+impl Mode {
+    /// All modes, in report order.
+    pub const ALL: [Mode; 3] = [Mode::Geometry, Mode::Model, Mode::Truth];
+
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Geometry => "geometry",
+            Mode::Model => "model",
+            Mode::Truth => "truth",
+        }
+    }
+
+    /// The API's segmentation mode.
+    pub fn segmentation_mode(self) -> landing_proto::v1::SegmentationMode {
+        use landing_proto::v1::SegmentationMode as S;
+        match self {
+            Mode::Geometry => S::None,
+            Mode::Model => S::Model,
+            Mode::Truth => S::PointClasses,
+        }
+    }
+
+    /// Parses [`Mode::name`].
+    pub fn parse(s: &str) -> Option<Mode> {
+        Mode::ALL.into_iter().find(|m| m.name() == s)
+    }
+}
+
+/// The pipeline steps the server times, in pipeline order.
+pub const STEPS: [&str; 10] = [
+    "queue",
+    "decode",
+    "segmentation",
+    "classification",
+    "triangulation",
+    "triangle_filter",
+    "plane_extraction",
+    "polygon_extraction",
+    "polylabel",
+    "total",
+];
+
+/// One frame processed in one mode.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameRecord {
+    pub mode: Mode,
+    /// Recording file and frame sequence, e.g. `scenarios/w3.mcap#12`.
+    pub frame: String,
+    /// Hard-case tags of the scenario (`tarp`, `water_tower`, `parapet_edge`, ...).
+    pub tags: Vec<String>,
+    /// The server's per-step times, milliseconds, in [`STEPS`] order (`None` for a step that did
+    /// not run).
+    pub step_ms: Vec<Option<f64>>,
+    /// Round trip seen by the client, milliseconds.
+    pub round_trip_ms: f64,
+    pub eval: FrameEval,
+}
+
+/// A frame the server did not answer with a result.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FrameFailure {
+    pub mode: Mode,
+    pub frame: String,
+    pub error: String,
+}
+
+/// Per-class results of one mode.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ClassSummary {
+    pub class: u8,
+    pub name: &'static str,
+    /// Obstacles of this class scored (in view and scanned).
+    pub obstacles: usize,
+    /// Obstacles some returned safe circle reached into.
+    pub hit: usize,
+    /// Mean fraction of the footprint left inside returned landing polygons.
+    pub mean_covered: f64,
+}
+
+/// The summary of one mode.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ModeSummary {
+    pub mode: Mode,
+    pub frames: usize,
+    pub failures: usize,
+    pub sites: usize,
+    pub unsafe_obstacle: usize,
+    pub unsafe_outside_roof: usize,
+    pub off_roof: usize,
+    /// Roofs scored for IoU and radius ratio.
+    pub roofs: usize,
+    /// Scored roofs without any safe site.
+    pub roofs_without_site: usize,
+    pub iou: Option<MeanCi>,
+    pub iou_median: Option<f64>,
+    pub ratio_median: Option<f64>,
+    /// Bootstrap 95 % interval of the median radius ratio.
+    pub ratio_median_ci: Option<(f64, f64)>,
+    pub ratio: Option<MeanCi>,
+    pub classes: Vec<ClassSummary>,
+    /// Per-step server time, milliseconds, in [`STEPS`] order.
+    pub steps: Vec<Option<MeanCi>>,
+    pub round_trip: Option<MeanCi>,
+}
+
+impl ModeSummary {
+    /// Sites judged unsafe: into an obstacle, past the roof edge, or off every roof.
+    pub fn unsafe_sites(&self) -> usize {
+        self.unsafe_obstacle + self.unsafe_outside_roof + self.off_roof
+    }
+}
+
+/// Targets of issue #8 for the segmented mode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Targets {
+    pub min_mean_iou: f64,
+    pub min_median_ratio: f64,
+}
+
+impl Default for Targets {
+    fn default() -> Self {
+        Self { min_mean_iou: 0.93, min_median_ratio: 0.9 }
+    }
+}
+
+/// Everything an evaluation produced.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Summary {
+    pub scenarios: usize,
+    pub modes: Vec<ModeSummary>,
+    /// Unsafe sites listed one by one (mode, frame, rank, verdict), for explaining each.
+    pub unsafe_list: Vec<(Mode, String, u32, Verdict)>,
+    pub failures: Vec<FrameFailure>,
+}
+
+/// The human name of a `SemanticClass` id.
+pub fn class_name(class: u8) -> &'static str {
+    match class {
+        1 => "sky",
+        2 => "ground",
+        3 => "building wall",
+        4 => "building rooftop",
+        5 => "small rooftop entrance",
+        6 => "skylight",
+        7 => "air vents",
+        8 => "ac-unit",
+        9 => "seating",
+        10 => "air ducts",
+        11 => "water tower",
+        12 => "chimney",
+        13 => "tarp",
+        14 => "vegetation",
+        _ => "unknown",
+    }
+}
+
+/// Aggregates records into a summary.
+pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mode]) -> Summary {
+    let mut scenarios: Vec<&str> = records.iter().map(|r| r.frame.as_str()).chain(failures.iter().map(|f| f.frame.as_str())).collect();
+    scenarios.sort_unstable();
+    scenarios.dedup();
+    let mut unsafe_list = Vec::new();
+    let mut out = Vec::new();
+    for &mode in modes {
+        let recs: Vec<&FrameRecord> = records.iter().filter(|r| r.mode == mode).collect();
+        let mut s = ModeSummary {
+            mode,
+            frames: recs.len(),
+            failures: failures.iter().filter(|f| f.mode == mode).count(),
+            sites: 0,
+            unsafe_obstacle: 0,
+            unsafe_outside_roof: 0,
+            off_roof: 0,
+            roofs: 0,
+            roofs_without_site: 0,
+            iou: None,
+            iou_median: None,
+            ratio_median: None,
+            ratio_median_ci: None,
+            ratio: None,
+            classes: Vec::new(),
+            steps: Vec::new(),
+            round_trip: None,
+        };
+        let mut ious = Vec::new();
+        let mut ratios = Vec::new();
+        let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
+        for r in &recs {
+            s.sites += r.eval.sites.len();
+            for site in &r.eval.sites {
+                match site.verdict {
+                    Verdict::Safe => continue,
+                    Verdict::Obstacle { .. } => s.unsafe_obstacle += 1,
+                    Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
+                    Verdict::OffRoof => s.off_roof += 1,
+                }
+                unsafe_list.push((mode, r.frame.clone(), site.rank, site.verdict));
+            }
+            for roof in &r.eval.roofs {
+                s.roofs += 1;
+                if roof.best_safe_radius_m <= 0.0 {
+                    s.roofs_without_site += 1;
+                }
+                ious.push(roof.iou);
+                ratios.push(roof.radius_ratio);
+            }
+            for o in &r.eval.obstacles {
+                let e = classes.entry(o.class).or_default();
+                e.0 += 1;
+                e.1 += usize::from(o.hit);
+                e.2 += o.covered_fraction;
+            }
+        }
+        s.iou = mean_ci95(&ious);
+        s.iou_median = median(&ious);
+        s.ratio = mean_ci95(&ratios);
+        s.ratio_median = median(&ratios);
+        s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| median(x).unwrap_or(f64::NAN));
+        s.classes = classes
+            .into_iter()
+            .map(|(class, (n, hit, cov))| ClassSummary {
+                class,
+                name: class_name(class),
+                obstacles: n,
+                hit,
+                mean_covered: cov / n.max(1) as f64,
+            })
+            .collect();
+        s.steps = (0..STEPS.len())
+            .map(|k| mean_ci95(&recs.iter().filter_map(|r| r.step_ms.get(k).copied().flatten()).collect::<Vec<_>>()))
+            .collect();
+        s.round_trip = mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>());
+        out.push(s);
+    }
+    Summary { scenarios: scenarios.len(), modes: out, unsafe_list, failures: failures.to_vec() }
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "-".into(), |v| format!("{v:.digits$}"))
+}
+
+fn ci(v: Option<MeanCi>, digits: usize) -> String {
+    v.map_or_else(|| "-".into(), |m| format!("{:.digits$} [{:.digits$}, {:.digits$}]", m.mean, m.lo, m.hi))
+}
+
+impl Summary {
+    /// The rows of the main table: a label and one cell per mode.
+    fn main_rows(&self) -> Vec<(String, Vec<String>)> {
+        let row = |label: &str, f: &dyn Fn(&ModeSummary) -> String| {
+            (label.to_string(), self.modes.iter().map(f).collect::<Vec<_>>())
+        };
+        vec![
+            row("frames answered / failed", &|m| format!("{} / {}", m.frames, m.failures)),
+            row("sites returned", &|m| m.sites.to_string()),
+            row("unsafe sites (all)", &|m| m.unsafe_sites().to_string()),
+            row("  into an obstacle", &|m| m.unsafe_obstacle.to_string()),
+            row("  past the roof edge", &|m| m.unsafe_outside_roof.to_string()),
+            row("  off every roof", &|m| m.off_roof.to_string()),
+            row("roofs scored", &|m| m.roofs.to_string()),
+            row("roofs without a safe site", &|m| m.roofs_without_site.to_string()),
+            row("polygon IoU, mean [95% CI]", &|m| ci(m.iou, 3)),
+            row("polygon IoU, median", &|m| opt(m.iou_median, 3)),
+            row("radius ratio, median [95% CI]", &|m| match (m.ratio_median, m.ratio_median_ci) {
+                (Some(v), Some((lo, hi))) => format!("{v:.3} [{lo:.3}, {hi:.3}]"),
+                (v, _) => opt(v, 3),
+            }),
+            row("radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
+            row("client round trip, ms", &|m| ci(m.round_trip, 1)),
+        ]
+    }
+
+    /// Per-class rows: class name, then "hit / n (covered %)" per mode.
+    fn class_rows(&self) -> Vec<(String, Vec<String>)> {
+        let mut classes: Vec<u8> = self.modes.iter().flat_map(|m| m.classes.iter().map(|c| c.class)).collect();
+        classes.sort_unstable();
+        classes.dedup();
+        classes
+            .into_iter()
+            .map(|class| {
+                let cells = self
+                    .modes
+                    .iter()
+                    .map(|m| match m.classes.iter().find(|c| c.class == class) {
+                        Some(c) => format!("{} / {} hit, {:.0}% covered", c.hit, c.obstacles, 100.0 * c.mean_covered),
+                        None => "-".into(),
+                    })
+                    .collect();
+                (class_name(class).to_string(), cells)
+            })
+            .collect()
+    }
+
+    fn step_rows(&self) -> Vec<(String, Vec<String>)> {
+        STEPS
+            .iter()
+            .enumerate()
+            .map(|(k, step)| {
+                (step.to_string(), self.modes.iter().map(|m| ci(m.steps.get(k).copied().flatten(), 2)).collect())
+            })
+            .collect()
+    }
+
+    /// The verdict on the issue's targets for `mode`: one line per target.
+    pub fn target_lines(&self, mode: Mode, targets: &Targets) -> Vec<(String, bool)> {
+        let Some(m) = self.modes.iter().find(|m| m.mode == mode) else { return Vec::new() };
+        let iou = m.iou.map(|c| c.mean);
+        vec![
+            (format!("{}: unsafe sites = {} (target 0)", mode.name(), m.unsafe_sites()), m.unsafe_sites() == 0 && m.frames > 0),
+            (
+                format!("{}: mean polygon IoU = {} (target >= {})", mode.name(), opt(iou, 3), targets.min_mean_iou),
+                iou.is_some_and(|v| v >= targets.min_mean_iou),
+            ),
+            (
+                format!("{}: median radius ratio = {} (target >= {})", mode.name(), opt(m.ratio_median, 3), targets.min_median_ratio),
+                m.ratio_median.is_some_and(|v| v >= targets.min_median_ratio),
+            ),
+        ]
+    }
+
+    /// The report as aligned plain-text tables.
+    pub fn to_text(&self) -> String {
+        let header: Vec<String> = self.modes.iter().map(|m| m.mode.name().to_string()).collect();
+        let mut s = String::new();
+        let _ = writeln!(s, "landing eval: {} frames, modes {}", self.scenarios, header.join(", "));
+        for (title, rows) in [
+            ("quality", self.main_rows()),
+            ("obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)", self.class_rows()),
+            ("server time per step, ms: mean [95% CI]", self.step_rows()),
+        ] {
+            let _ = writeln!(s, "\n{title}");
+            text_table(&mut s, &header, &rows);
+        }
+        s
+    }
+
+    /// The report as Markdown (tables, targets, the list of unsafe sites, and the charts).
+    pub fn to_markdown(&self, targets: &Targets, gate: &[Mode], charts: &[(&str, &str)]) -> String {
+        let header: Vec<String> = self.modes.iter().map(|m| format!("`{}`", m.mode.name())).collect();
+        let mut s = String::new();
+        let _ = writeln!(s, "{} frames evaluated in {} mode(s).\n", self.scenarios, self.modes.len());
+        for &mode in gate {
+            for (line, ok) in self.target_lines(mode, targets) {
+                let _ = writeln!(s, "- {} {line}", if ok { "PASS" } else { "FAIL" });
+            }
+        }
+        for (title, rows) in [
+            ("Quality", self.main_rows()),
+            ("Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)", self.class_rows()),
+            ("Server time per step, ms: mean [95 % CI]", self.step_rows()),
+        ] {
+            let _ = writeln!(s, "\n#### {title}\n");
+            md_table(&mut s, &header, &rows);
+        }
+        if !self.unsafe_list.is_empty() {
+            let _ = writeln!(s, "\n#### Unsafe sites\n\n| mode | frame | rank | verdict |\n|---|---|---|---|");
+            for (mode, frame, rank, v) in self.unsafe_list.iter().take(200) {
+                let _ = writeln!(s, "| {} | {frame} | {rank} | {} |", mode.name(), verdict_text(v));
+            }
+            if self.unsafe_list.len() > 200 {
+                let _ = writeln!(s, "\n({} more in results.json)", self.unsafe_list.len() - 200);
+            }
+        }
+        if !self.failures.is_empty() {
+            let _ = writeln!(s, "\n#### Frames without a result\n\n| mode | frame | error |\n|---|---|---|");
+            for f in self.failures.iter().take(50) {
+                let _ = writeln!(s, "| {} | {} | {} |", f.mode.name(), f.frame, f.error.replace('|', "/"));
+            }
+        }
+        for (title, file) in charts {
+            let _ = writeln!(s, "\n![{title}]({file})");
+        }
+        s
+    }
+
+    /// Draws the charts into `dir`; returns (title, file name) of each.
+    pub fn write_charts(&self, dir: &Path, records: &[FrameRecord]) -> Result<Vec<(&'static str, String)>, ClientError> {
+        let names: Vec<&str> = self.modes.iter().map(|m| m.mode.name()).collect();
+        let groups: Vec<BarGroup> = STEPS
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| self.modes.iter().any(|m| m.steps.get(*k).copied().flatten().is_some()))
+            .map(|(k, step)| BarGroup {
+                label: step.replace('_', " "),
+                values: self.modes.iter().map(|m| m.steps.get(k).copied().flatten()).collect(),
+            })
+            .collect();
+        let mut written = Vec::new();
+        let mut save = |title: &'static str, file: &str, canvas: super::plot::Canvas| -> Result<(), ClientError> {
+            canvas.save(&dir.join(file))?;
+            written.push((title, file.to_string()));
+            Ok(())
+        };
+        save(
+            "Per-step time with 95 % CI (log scale)",
+            "timing.png",
+            bars_log("SERVER TIME PER STEP, MEAN AND 95% CI", "MS (LOG)", &names, &groups),
+        )?;
+        let per_mode = |f: &dyn Fn(&FrameRecord) -> Vec<f64>| -> Vec<(&str, Vec<f64>)> {
+            self.modes
+                .iter()
+                .map(|m| (m.mode.name(), records.iter().filter(|r| r.mode == m.mode).flat_map(f).collect()))
+                .collect()
+        };
+        let ratios = per_mode(&|r| r.eval.roofs.iter().map(|x| x.radius_ratio).collect());
+        let hi = ratios.iter().flat_map(|(_, v)| v.iter().copied()).fold(1.2f64, f64::max).min(3.0);
+        save(
+            "Radius ratio (returned / true best) per mode",
+            "radius_ratio.png",
+            box_plot("RADIUS RATIO: RETURNED / TRUE BEST", &ratios, (0.0, hi), Some(0.9)),
+        )?;
+        let ious = per_mode(&|r| r.eval.roofs.iter().map(|x| x.iou).collect());
+        save("Polygon IoU per mode", "iou.png", box_plot("POLYGON IOU WITH TRUE LANDABLE AREA", &ious, (0.0, 1.0), Some(0.93)))?;
+        Ok(written)
+    }
+}
+
+fn verdict_text(v: &Verdict) -> String {
+    match v {
+        Verdict::Safe => "safe".into(),
+        Verdict::Obstacle { class, intrusion_m } => format!("{intrusion_m:.2} m into a {}", class_name(*class)),
+        Verdict::OutsideRoof { intrusion_m } => format!("{intrusion_m:.2} m past the roof edge"),
+        Verdict::OffRoof => "centre on no roof".into(),
+    }
+}
+
+fn text_table(s: &mut String, header: &[String], rows: &[(String, Vec<String>)]) {
+    let first = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
+    let widths: Vec<usize> = (0..header.len())
+        .map(|k| rows.iter().map(|r| r.1[k].chars().count()).chain([header[k].len()]).max().unwrap_or(0))
+        .collect();
+    let _ = write!(s, "  {:first$}", "");
+    for (h, w) in header.iter().zip(&widths) {
+        let _ = write!(s, "  {h:>w$}");
+    }
+    s.push('\n');
+    for (label, cells) in rows {
+        let _ = write!(s, "  {label:first$}");
+        for (c, w) in cells.iter().zip(&widths) {
+            let _ = write!(s, "  {c:>w$}");
+        }
+        s.push('\n');
+    }
+}
+
+fn md_table(s: &mut String, header: &[String], rows: &[(String, Vec<String>)]) {
+    let _ = writeln!(s, "| | {} |", header.join(" | "));
+    let _ = writeln!(s, "|---|{}", "---:|".repeat(header.len()));
+    for (label, cells) in rows {
+        let _ = writeln!(s, "| {} | {} |", label.trim(), cells.join(" | "));
+    }
+}
+
+/// Writes `summary.md`, `results.json` and the charts into `dir` (created if missing); returns
+/// the Markdown.
+pub fn write_report(
+    dir: &Path,
+    summary: &Summary,
+    records: &[FrameRecord],
+    targets: &Targets,
+    gate: &[Mode],
+) -> Result<String, ClientError> {
+    let io = |path: PathBuf| move |e: std::io::Error| ClientError::Io { path: path.display().to_string(), source: e };
+    std::fs::create_dir_all(dir).map_err(io(dir.to_path_buf()))?;
+    let charts = summary.write_charts(dir, records)?;
+    let chart_refs: Vec<(&str, &str)> = charts.iter().map(|(t, f)| (*t, f.as_str())).collect();
+    let md = summary.to_markdown(targets, gate, &chart_refs);
+    std::fs::write(dir.join("summary.md"), &md).map_err(io(dir.join("summary.md")))?;
+    let json = serde_json::json!({ "summary": summary, "records": records });
+    let text = serde_json::to_string_pretty(&json)
+        .map_err(|e| ClientError::InvalidInput { field: "results", reason: e.to_string() })?;
+    std::fs::write(dir.join("results.json"), text).map_err(io(dir.join("results.json")))?;
+    Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::metrics::{ObstacleEval, RoofEval, SiteEval};
+    use super::*;
+
+    fn record(mode: Mode, frame: &str, verdict: Verdict, iou: f64, ratio: f64) -> FrameRecord {
+        FrameRecord {
+            mode,
+            frame: frame.into(),
+            tags: vec![],
+            step_ms: vec![Some(1.0); STEPS.len()],
+            round_trip_ms: 5.0,
+            eval: FrameEval {
+                sites: vec![SiteEval { rank: 1, radius_m: 3.0, roof: Some(0), verdict }],
+                roofs: vec![RoofEval {
+                    roof: 0,
+                    roof_id: 1,
+                    truth_area_m2: 100.0,
+                    truth_radius_m: 4.0,
+                    stated_truth_radius_m: None,
+                    returned_area_m2: 90.0,
+                    best_safe_radius_m: if verdict.is_safe() { 3.0 } else { 0.0 },
+                    radius_ratio: ratio,
+                    iou,
+                }],
+                obstacles: vec![ObstacleEval { roof: 0, class: 13, scanned_area_m2: 4.0, covered_fraction: 1.0 - iou, hit: !verdict.is_safe() }],
+            },
+        }
+    }
+
+    #[test]
+    fn summary_counts_and_targets() {
+        let tarp = Verdict::Obstacle { class: 13, intrusion_m: 1.0 };
+        let records = vec![
+            record(Mode::Geometry, "a#1", tarp, 0.8, 0.0),
+            record(Mode::Geometry, "a#2", Verdict::Safe, 0.9, 0.8),
+            record(Mode::Model, "a#1", Verdict::Safe, 0.95, 0.92),
+            record(Mode::Model, "a#2", Verdict::Safe, 0.97, 0.95),
+        ];
+        let s = summarize(&records, &[], &[Mode::Geometry, Mode::Model]);
+        assert_eq!(s.scenarios, 2);
+        assert_eq!(s.modes[0].unsafe_obstacle, 1);
+        assert_eq!(s.modes[0].classes[0].hit, 1);
+        assert_eq!(s.modes[1].unsafe_sites(), 0);
+        assert!((s.modes[1].iou.unwrap().mean - 0.96).abs() < 1e-9);
+        let lines = s.target_lines(Mode::Model, &Targets::default());
+        assert!(lines.iter().all(|(_, ok)| *ok), "{lines:?}");
+        assert!(s.target_lines(Mode::Geometry, &Targets::default()).iter().any(|(_, ok)| !ok));
+        assert_eq!(s.unsafe_list.len(), 1);
+        let text = s.to_text();
+        assert!(text.contains("tarp") && text.contains("geometry"), "{text}");
+        let md = s.to_markdown(&Targets::default(), &[Mode::Model], &[]);
+        assert!(md.contains("- PASS model: unsafe sites = 0"), "{md}");
+        assert!(md.contains("into a tarp"), "{md}");
+    }
+}

@@ -1,0 +1,191 @@
+//! Scenarios from `landing-sim` recordings: each `landing.v1.Frame` (topic `/frame`) paired by
+//! sequence number with its `landing.v1.GroundTruth` (topic `/ground_truth`), converted to the
+//! metrics' domain types.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use landing_proto::v1::{Frame, GroundTruth, LinearRing, SemanticClass};
+use prost::Message;
+
+use super::geom::{P2, Polygon2, bounds_of};
+use super::metrics::{Obstacle, RoofTruth};
+use super::run::Scenario;
+use crate::ClientError;
+
+/// Schema name of recorded ground truth.
+pub const TRUTH_SCHEMA: &str = "landing.v1.GroundTruth";
+/// Schema name of recorded frames.
+pub const FRAME_SCHEMA: &str = "landing.v1.Frame";
+
+/// Parapet walls of the simulated city are this thick at least and at most, metres. The ground
+/// truth gives the parapet's height, not its thickness; the thickness is read off the landable
+/// region where the scan reaches the parapet and kept within these bounds.
+pub const PARAPET_THICKNESS_M: (f64, f64) = (0.2, 0.45);
+
+/// Reads every file and pairs frames with their ground truth; frames without truth are skipped.
+pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, ClientError> {
+    let mut out = Vec::new();
+    for f in files {
+        let bytes = std::fs::read(f).map_err(|e| ClientError::Io { path: f.display().to_string(), source: e })?;
+        let pairs = pairs_from_bytes(&bytes)
+            .map_err(|reason| ClientError::Recording { path: f.display().to_string(), reason })?;
+        let name = super::cli::short_name(f);
+        for (frame, truth) in pairs {
+            out.push(scenario_of(&name, frame, &truth));
+        }
+    }
+    if out.is_empty() {
+        return Err(ClientError::InvalidInput {
+            field: "recordings",
+            reason: format!("no frame with `{TRUTH_SCHEMA}` ground truth in {files:?}"),
+        });
+    }
+    Ok(out)
+}
+
+/// The (frame, ground truth) pairs of an MCAP file held in memory, in frame order.
+pub fn pairs_from_bytes(bytes: &[u8]) -> Result<Vec<(Frame, GroundTruth)>, String> {
+    let mut frames: BTreeMap<u64, Frame> = BTreeMap::new();
+    let mut truths: BTreeMap<u64, GroundTruth> = BTreeMap::new();
+    for message in mcap::MessageStream::new(bytes).map_err(|e| e.to_string())? {
+        let message = message.map_err(|e| e.to_string())?;
+        let Some(schema) = message.channel.schema.as_ref() else { continue };
+        match schema.name.as_str() {
+            FRAME_SCHEMA => {
+                let f = Frame::decode(&message.data[..]).map_err(|e| format!("{FRAME_SCHEMA}: {e}"))?;
+                frames.insert(f.sequence, f);
+            }
+            TRUTH_SCHEMA => {
+                let t = GroundTruth::decode(&message.data[..]).map_err(|e| format!("{TRUTH_SCHEMA}: {e}"))?;
+                truths.insert(t.sequence, t);
+            }
+            _ => {}
+        }
+    }
+    Ok(frames.into_iter().filter_map(|(seq, f)| truths.remove(&seq).map(|t| (f, t))).collect())
+}
+
+fn ring(r: Option<&LinearRing>) -> Vec<P2> {
+    r.map(|r| r.points.iter().map(|p| [p.x, p.y]).collect()).unwrap_or_default()
+}
+
+/// Converts one frame's ground truth. Small buildings standing on a roof (obstacles of class
+/// building rooftop) are also added as raised roofs, not scored, so that a site on their top is
+/// judged against their footprint instead of counting as a site inside an obstacle.
+pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
+    let mut roofs = Vec::new();
+    let mut raised = Vec::new();
+    for r in &truth.roofs {
+        let outline = Polygon2::simple(ring(r.outline.as_ref()));
+        let landable = r
+            .landable_region
+            .as_ref()
+            .map(|p| Polygon2 { shell: ring(p.shell.as_ref()), holes: vec![] })
+            .unwrap_or_default();
+        let interior = interior_of(&outline, &landable, r.parapet_height_m);
+        let obstacles: Vec<Obstacle> = r
+            .obstacles
+            .iter()
+            .map(|o| Obstacle {
+                class: u8::try_from(o.semantic_class).unwrap_or(0),
+                footprint: Polygon2::simple(ring(o.footprint.as_ref())),
+            })
+            .collect();
+        for o in &r.obstacles {
+            if o.semantic_class == SemanticClass::BuildingRooftop as i32 {
+                let fp = Polygon2::simple(ring(o.footprint.as_ref()));
+                raised.push(RoofTruth {
+                    id: r.building,
+                    outline: fp.clone(),
+                    interior: fp,
+                    height_m: r.height_m + o.height_m,
+                    obstacles: vec![],
+                    scanned: None,
+                    stated_best_radius_m: None,
+                    scored: false,
+                });
+            }
+        }
+        roofs.push(RoofTruth {
+            id: r.building,
+            outline,
+            interior,
+            height_m: r.height_m,
+            obstacles,
+            // The simulator's scanned region: interior ∩ convex hull of the scan on this roof.
+            scanned: (landable.shell.len() >= 3).then_some(landable),
+            stated_best_radius_m: Some(r.best_safe_radius_m),
+            scored: true,
+        });
+    }
+    roofs.extend(raised);
+    Scenario { name: format!("{file}#{}", frame.sequence), tags: tags_of(truth), frame, roofs }
+}
+
+/// Hard-case tags of a frame, from its target roof (the first) and the roofs around it.
+pub fn tags_of(truth: &GroundTruth) -> Vec<String> {
+    let mut tags = Vec::new();
+    let Some(target) = truth.roofs.first() else { return tags };
+    let seen = |c: SemanticClass| target.obstacles.iter().any(|o| o.semantic_class == c as i32 && o.seen_by_lidar);
+    if seen(SemanticClass::Tarp) {
+        tags.push("tarp".to_string());
+    }
+    if seen(SemanticClass::WaterTower) {
+        tags.push("water_tower".to_string());
+    }
+    if target.parapet_height_m > 0.0 {
+        tags.push("parapet".to_string());
+    }
+    if truth.roofs.iter().skip(1).any(|r| (r.height_m - target.height_m).abs() > 0.5) {
+        tags.push("adjacent_roofs".to_string());
+    }
+    tags
+}
+
+/// The walkable roof: for an axis-aligned rectangular outline with a parapet, the outline shrunk
+/// by the parapet's thickness, read off the gap between the outline and the landable region (the
+/// narrowest side) and kept within [`PARAPET_THICKNESS_M`]; without a parapet, the outline.
+pub fn interior_of(outline: &Polygon2, landable: &Polygon2, parapet_height_m: f64) -> Polygon2 {
+    if parapet_height_m <= 0.0 {
+        return outline.clone();
+    }
+    let Some((lo, hi)) = outline.bounds() else { return outline.clone() };
+    let is_rect = outline.shell.len() == 4
+        && outline.shell.iter().all(|p| {
+            ((p[0] - lo[0]).abs() < 1e-6 || (p[0] - hi[0]).abs() < 1e-6)
+                && ((p[1] - lo[1]).abs() < 1e-6 || (p[1] - hi[1]).abs() < 1e-6)
+        });
+    if !is_rect {
+        return outline.clone();
+    }
+    let gap = bounds_of(&landable.shell)
+        .map(|(a, b)| (a[0] - lo[0]).min(a[1] - lo[1]).min(hi[0] - b[0]).min(hi[1] - b[1]))
+        .unwrap_or(PARAPET_THICKNESS_M.1);
+    let t = gap.clamp(PARAPET_THICKNESS_M.0, PARAPET_THICKNESS_M.1);
+    Polygon2::rect([lo[0] + t, lo[1] + t], [hi[0] - t, hi[1] - t])
+}
+
+/// Convenience for tests and tools: the scenarios of one file.
+pub fn load_file(path: &Path) -> Result<Vec<Scenario>, ClientError> {
+    load_scenarios(&[path.to_path_buf()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interior_reads_the_parapet_thickness_off_the_landable_region() {
+        let outline = Polygon2::rect([0.0, 0.0], [20.0, 10.0]);
+        // The scan reaches the parapet on the left side, 0.3 m in.
+        let landable = Polygon2::rect([0.3, 2.0], [12.0, 9.0]);
+        let i = interior_of(&outline, &landable, 0.8);
+        assert_eq!(i.bounds().unwrap(), ([0.3, 0.3], [19.7, 9.7]));
+        // No parapet: the outline.
+        assert_eq!(interior_of(&outline, &landable, 0.0), outline);
+        // A scan that reaches no edge: the thickest parapet.
+        let i = interior_of(&outline, &Polygon2::rect([5.0, 3.0], [8.0, 6.0]), 0.8);
+        assert_eq!(i.bounds().unwrap(), ([0.45, 0.45], [19.55, 9.55]));
+    }
+}

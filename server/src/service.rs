@@ -1,0 +1,216 @@
+//! The `landing.v1.LandingService` handlers: validate and convert, hand to the dispatcher, convert
+//! back. No pipeline logic and no metrics here.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use landing_geometry::SemanticClass;
+use landing_proto::v1;
+use tokio::sync::{mpsc, watch};
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+
+use crate::convert;
+use crate::status::{to_rpc_status, to_status};
+use crate::workers::{Dispatcher, Done};
+
+/// The service state shared by every call.
+#[derive(Debug, Clone)]
+pub(crate) struct LandingService {
+    pub dispatcher: Arc<Dispatcher>,
+    pub stream_buffer: usize,
+    pub max_request_bytes: u64,
+    /// Flips to true when the server starts draining: open streams stop reading.
+    pub draining: watch::Receiver<bool>,
+}
+
+/// The deadline a caller set with `grpc-timeout`, if any.
+pub(crate) fn deadline_of(metadata: &tonic::metadata::MetadataMap) -> Option<Instant> {
+    let value = metadata.get("grpc-timeout")?.to_str().ok()?;
+    let (digits, unit) = value.split_at(value.len().checked_sub(1)?);
+    let n: u64 = digits.parse().ok()?;
+    let timeout = match unit {
+        "H" => Duration::from_secs(n.saturating_mul(3600)),
+        "M" => Duration::from_secs(n.saturating_mul(60)),
+        "S" => Duration::from_secs(n),
+        "m" => Duration::from_millis(n),
+        "u" => Duration::from_micros(n),
+        "n" => Duration::from_nanos(n),
+        _ => return None,
+    };
+    Instant::now().checked_add(timeout)
+}
+
+fn never() -> impl std::future::Future<Output = u64> + Send + 'static {
+    std::future::pending()
+}
+
+fn stream_response(sequence: u64, done: Done) -> v1::StreamLandingSitesResponse {
+    use v1::stream_landing_sites_response::Outcome;
+    let outcome = match done {
+        Done::Computed(out) => Outcome::Result(v1::FrameResult::from(&*out)),
+        Done::Failed(e) => Outcome::Error(to_rpc_status(&e)),
+        Done::Skipped { superseded_by } => Outcome::Skipped(v1::FrameSkipped {
+            superseded_by_sequence: superseded_by,
+        }),
+    };
+    v1::StreamLandingSitesResponse {
+        sequence,
+        outcome: Some(outcome),
+    }
+}
+
+#[tonic::async_trait]
+impl v1::landing_service_server::LandingService for LandingService {
+    async fn detect_landing_sites(
+        &self,
+        request: Request<v1::DetectLandingSitesRequest>,
+    ) -> Result<Response<v1::DetectLandingSitesResponse>, Status> {
+        let deadline = deadline_of(request.metadata());
+        let request = request.into_inner();
+        let parts = convert::request_parts(&request, &self.dispatcher.pipeline.defaults);
+        // Awaited in place: if the caller goes away, tonic drops this future and the frame stops.
+        match self
+            .dispatcher
+            .process("unary", parts, deadline, never())
+            .await
+        {
+            Done::Computed(out) => Ok(Response::new(v1::DetectLandingSitesResponse {
+                result: Some(v1::FrameResult::from(&*out)),
+            })),
+            Done::Failed(e) => Err(to_status(&e)),
+            Done::Skipped { .. } => Err(Status::internal("a unary frame cannot be skipped")),
+        }
+    }
+
+    type StreamLandingSitesStream = ReceiverStream<Result<v1::StreamLandingSitesResponse, Status>>;
+
+    async fn stream_landing_sites(
+        &self,
+        request: Request<Streaming<v1::StreamLandingSitesRequest>>,
+    ) -> Result<Response<Self::StreamLandingSitesStream>, Status> {
+        let deadline = deadline_of(request.metadata());
+        let mut inbound = request.into_inner();
+        let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
+        // Frames in flight for this stream, in arrival order; its bound is the BLOCK back-pressure.
+        let (pending_tx, mut pending_rx) =
+            mpsc::channel::<(u64, tokio::task::JoinHandle<Done>)>(self.stream_buffer);
+        // (arrival index, sequence) of the newest frame, for LATEST.
+        let (latest_tx, latest_rx) = watch::channel((0u64, 0u64));
+        let (cancel_tx, mut cancel_rx) = watch::channel(false);
+        let dispatcher = self.dispatcher.clone();
+        let mut draining = self.draining.clone();
+        dispatcher.metrics.streams(1.0);
+
+        // Reader: validates, admits and starts each frame; stops on end of stream, error,
+        // cancellation or drain.
+        let reader_dispatcher = dispatcher.clone();
+        tokio::spawn(async move {
+            let dispatcher = reader_dispatcher;
+            let mut latest_policy = None;
+            let mut index = 0u64;
+            loop {
+                if *draining.borrow() {
+                    break;
+                }
+                let message = tokio::select! {
+                    m = inbound.message() => m,
+                    changed = draining.changed() => {
+                        if changed.is_err() {
+                            break;
+                        }
+                        continue;
+                    }
+                    _ = cancel_rx.changed() => break,
+                };
+                let request = match message {
+                    Ok(Some(r)) => r,
+                    Ok(None) => break,
+                    Err(status) => {
+                        tracing::debug!(%status, "stream input ended with an error");
+                        break;
+                    }
+                };
+                let latest = *latest_policy
+                    .get_or_insert(request.overflow_policy == v1::OverflowPolicy::Latest as i32);
+                let sequence = request.frame.as_ref().map_or(0, |f| f.sequence);
+                index += 1;
+                latest_tx.send_replace((index, sequence));
+                let parts = convert::stream_parts(&request, &dispatcher.pipeline.defaults);
+                drop(request);
+                let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =
+                    if latest {
+                        let mut rx = latest_rx.clone();
+                        let mine = index;
+                        Box::pin(async move {
+                            let newer = rx.wait_for(|(i, _)| *i > mine).await.map(|v| v.1);
+                            match newer {
+                                Ok(sequence) => sequence,
+                                Err(_) => std::future::pending().await,
+                            }
+                        })
+                    } else {
+                        Box::pin(never())
+                    };
+                let job = tokio::spawn(dispatcher.process("stream", parts, deadline, superseded));
+                if pending_tx.send((sequence, job)).await.is_err() {
+                    break;
+                }
+            }
+        });
+
+        // Writer: answers in order, one response per frame; on cancellation aborts what is left.
+        tokio::spawn(async move {
+            let abort_rest = |rx: &mut mpsc::Receiver<(u64, tokio::task::JoinHandle<Done>)>| {
+                rx.close();
+                while let Ok((_, job)) = rx.try_recv() {
+                    job.abort();
+                }
+            };
+            while let Some((sequence, mut job)) = pending_rx.recv().await {
+                let done = tokio::select! {
+                    joined = &mut job => match joined {
+                        Ok(done) => done,
+                        Err(e) => Done::Failed(crate::Error::Internal(format!("frame task failed: {e}"))),
+                    },
+                    () = out_tx.closed() => {
+                        job.abort();
+                        break;
+                    }
+                };
+                if out_tx
+                    .send(Ok(stream_response(sequence, done)))
+                    .await
+                    .is_err()
+                {
+                    break;
+                }
+            }
+            let _ = cancel_tx.send(true);
+            abort_rest(&mut pending_rx);
+            dispatcher.metrics.streams(-1.0);
+        });
+        Ok(Response::new(ReceiverStream::new(out_rx)))
+    }
+
+    async fn get_service_info(
+        &self,
+        _request: Request<v1::GetServiceInfoRequest>,
+    ) -> Result<Response<v1::ServiceInfo>, Status> {
+        let pipeline = &self.dispatcher.pipeline;
+        let classes = SemanticClass::ALL
+            .iter()
+            .map(|&c| v1::ClassInfo {
+                class: c as i32,
+                name: c.name().to_owned(),
+            })
+            .collect();
+        Ok(Response::new(v1::ServiceInfo {
+            version: env!("CARGO_PKG_VERSION").to_owned(),
+            model: pipeline.segmenter.as_ref().map(|s| s.model_info()),
+            classes,
+            default_options: Some(convert::default_options(&pipeline.defaults)),
+            max_request_bytes: self.max_request_bytes,
+        }))
+    }
+}

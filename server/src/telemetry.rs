@@ -1,0 +1,267 @@
+//! Logs (tracing, pretty or JSON) and metrics (Prometheus, one recorder per server, served on its
+//! own port). Every metric is counted here, through [`Metrics`], from the dispatch layer.
+
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use metrics_exporter_prometheus::{PrometheusBuilder, PrometheusHandle, PrometheusRecorder};
+use tokio::io::{AsyncReadExt as _, AsyncWriteExt as _};
+use tokio::net::TcpListener;
+use tracing_subscriber::EnvFilter;
+
+use crate::Error;
+use crate::config::LogConfig;
+
+/// Installs the global tracing subscriber (once per process; later calls are no-ops).
+/// `RUST_LOG` overrides `log.filter`.
+pub fn init_tracing(log: &LogConfig) -> Result<(), Error> {
+    let filter = match std::env::var("RUST_LOG") {
+        Ok(f) if !f.is_empty() => {
+            EnvFilter::try_new(&f).map_err(|e| Error::config("RUST_LOG", e.to_string()))?
+        }
+        _ => EnvFilter::try_new(&log.filter)
+            .map_err(|e| Error::config("log.filter", e.to_string()))?,
+    };
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    // A second install (several servers in one test process) keeps the first subscriber.
+    let _ = if log.format == "json" {
+        builder.json().try_init()
+    } else {
+        builder.try_init()
+    };
+    Ok(())
+}
+
+/// How one frame ended, as counted in `landing_frames_total{outcome}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    Ok,
+    Invalid,
+    Overloaded,
+    DeadlineExceeded,
+    Cancelled,
+    Skipped,
+    Unavailable,
+    Failed,
+}
+
+impl Outcome {
+    /// The label value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Ok => "ok",
+            Self::Invalid => "invalid",
+            Self::Overloaded => "overloaded",
+            Self::DeadlineExceeded => "deadline_exceeded",
+            Self::Cancelled => "cancelled",
+            Self::Skipped => "skipped",
+            Self::Unavailable => "unavailable",
+            Self::Failed => "failed",
+        }
+    }
+
+    /// The outcome of a frame that failed with `error`.
+    pub fn of(error: &Error) -> Self {
+        match crate::status::code_of(error) {
+            tonic::Code::InvalidArgument | tonic::Code::FailedPrecondition => Self::Invalid,
+            tonic::Code::ResourceExhausted => Self::Overloaded,
+            tonic::Code::DeadlineExceeded => Self::DeadlineExceeded,
+            tonic::Code::Cancelled => Self::Cancelled,
+            tonic::Code::Unavailable => Self::Unavailable,
+            _ => Self::Failed,
+        }
+    }
+}
+
+/// This server's metrics: a Prometheus recorder of its own (so several servers can run in one
+/// process) and the handle that renders it.
+#[derive(Clone)]
+pub struct Metrics {
+    recorder: Arc<PrometheusRecorder>,
+    handle: PrometheusHandle,
+}
+
+impl std::fmt::Debug for Metrics {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Metrics")
+    }
+}
+
+/// Histogram buckets for latencies, seconds.
+const LATENCY_BUCKETS: [f64; 14] = [
+    0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0,
+];
+
+impl Metrics {
+    /// A fresh recorder.
+    pub fn new() -> Self {
+        let recorder = PrometheusBuilder::new()
+            .set_buckets(&LATENCY_BUCKETS)
+            .map(PrometheusBuilder::build_recorder)
+            .unwrap_or_else(|_| PrometheusBuilder::new().build_recorder());
+        let handle = recorder.handle();
+        let metrics = Self {
+            recorder: Arc::new(recorder),
+            handle,
+        };
+        metrics.describe();
+        metrics
+    }
+
+    fn with<T>(&self, f: impl FnOnce() -> T) -> T {
+        metrics::with_local_recorder(&*self.recorder, f)
+    }
+
+    fn describe(&self) {
+        self.with(|| {
+            metrics::describe_counter!(
+                "landing_frames_total",
+                "Frames answered, by RPC and outcome."
+            );
+            metrics::describe_histogram!(
+                "landing_stage_seconds",
+                metrics::Unit::Seconds,
+                "Time per pipeline stage."
+            );
+            metrics::describe_histogram!(
+                "landing_frame_seconds",
+                metrics::Unit::Seconds,
+                "Time from receipt to answer."
+            );
+            metrics::describe_gauge!(
+                "landing_queue_depth",
+                "Frames admitted and not yet finished."
+            );
+            metrics::describe_gauge!("landing_in_flight", "Frames being computed on a worker.");
+            metrics::describe_gauge!("landing_streams_open", "Open detection streams.");
+        });
+    }
+
+    /// Counts a finished frame.
+    pub fn frame(&self, rpc: &'static str, outcome: Outcome, total: Duration) {
+        self.with(|| {
+            metrics::counter!("landing_frames_total", "rpc" => rpc, "outcome" => outcome.as_str())
+                .increment(1);
+            metrics::histogram!("landing_frame_seconds", "rpc" => rpc).record(total.as_secs_f64());
+        });
+    }
+
+    /// Records the stage timings of a computed frame.
+    pub fn stages(&self, t: &crate::pipeline::StageTimings) {
+        self.with(|| {
+            for (stage, d) in [
+                ("queue", t.queue),
+                ("decode", t.decode),
+                ("segmentation", t.segmentation),
+                ("classification", t.classification),
+                ("triangulation", t.triangulation),
+                ("triangle_filter", t.triangle_filter),
+                ("plane_extraction", t.plane_extraction),
+                ("polygon_extraction", t.polygon_extraction),
+                ("polylabel", t.polylabel),
+            ] {
+                if let Some(d) = d {
+                    metrics::histogram!("landing_stage_seconds", "stage" => stage)
+                        .record(d.as_secs_f64());
+                }
+            }
+        });
+    }
+
+    /// Sets the queue-depth and in-flight gauges.
+    pub fn queue(&self, depth: usize, in_flight: usize) {
+        self.with(|| {
+            metrics::gauge!("landing_queue_depth").set(depth as f64);
+            metrics::gauge!("landing_in_flight").set(in_flight as f64);
+        });
+    }
+
+    /// Adds `delta` to the open-streams gauge.
+    pub fn streams(&self, delta: f64) {
+        self.with(|| metrics::gauge!("landing_streams_open").increment(delta));
+    }
+
+    /// The Prometheus text exposition of every metric.
+    pub fn render(&self) -> String {
+        self.handle.run_upkeep();
+        self.handle.render()
+    }
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Serves `GET /metrics` (Prometheus text format) on `listener` until `shutdown` resolves.
+/// A deliberately tiny HTTP/1.1 responder: one request per connection.
+pub async fn serve_metrics(
+    listener: TcpListener,
+    metrics: Metrics,
+    shutdown: impl std::future::Future<Output = ()>,
+) {
+    tokio::pin!(shutdown);
+    loop {
+        let accepted = tokio::select! {
+            _ = &mut shutdown => return,
+            a = listener.accept() => a,
+        };
+        let Ok((mut socket, _)) = accepted else {
+            continue;
+        };
+        let metrics = metrics.clone();
+        tokio::spawn(async move {
+            let mut buf = Vec::with_capacity(1024);
+            let mut chunk = [0u8; 1024];
+            // Read the request head, bounded in size and time.
+            let read = tokio::time::timeout(Duration::from_secs(5), async {
+                while !buf.windows(4).any(|w| w == b"\r\n\r\n") && buf.len() < 16 * 1024 {
+                    match socket.read(&mut chunk).await {
+                        Ok(0) | Err(_) => break,
+                        Ok(n) => buf.extend_from_slice(&chunk[..n]),
+                    }
+                }
+            })
+            .await;
+            if read.is_err() {
+                return;
+            }
+            let head = String::from_utf8_lossy(&buf);
+            let mut words = head.split_whitespace();
+            let (method, path) = (words.next().unwrap_or(""), words.next().unwrap_or(""));
+            let (status, body) =
+                if method == "GET" && (path == "/metrics" || path.starts_with("/metrics?")) {
+                    ("200 OK", metrics.render())
+                } else {
+                    (
+                        "404 Not Found",
+                        "only GET /metrics is served here\n".to_owned(),
+                    )
+                };
+            let response = format!(
+                "HTTP/1.1 {status}\r\ncontent-type: text/plain; version=0.0.4\r\ncontent-length: {}\r\n\
+                 connection: close\r\n\r\n{body}",
+                body.len()
+            );
+            let _ = socket.write_all(response.as_bytes()).await;
+            let _ = socket.shutdown().await;
+        });
+    }
+}
+
+/// Fetches `http://addr/metrics` (used by tests and the `check` tooling).
+pub async fn scrape(addr: SocketAddr) -> std::io::Result<String> {
+    let mut socket = tokio::net::TcpStream::connect(addr).await?;
+    socket
+        .write_all(b"GET /metrics HTTP/1.1\r\nhost: localhost\r\n\r\n")
+        .await?;
+    let mut out = String::new();
+    socket.read_to_string(&mut out).await?;
+    Ok(out
+        .split_once("\r\n\r\n")
+        .map_or(out.clone(), |(_, body)| body.to_owned()))
+}

@@ -1,0 +1,375 @@
+//! Simulated flights as MCAP recordings, and a reader for them.
+//!
+//! A recording has three protobuf channels (schemas embedded as `landing_proto::FILE_DESCRIPTOR_SET`):
+//!
+//! | topic | schema | content |
+//! |---|---|---|
+//! | [`FRAME_TOPIC`] `/frame` | `landing.v1.Frame` | LiDAR scan (LiDAR frame, pose = T_world_lidar; fields x, y, z, intensity FLOAT32 and class UINT8, stride 17) and PNG camera image (pose = T_world_camera, optical) |
+//! | [`TRUTH_TOPIC`] `/ground_truth` | `landing.v1.GroundTruth` | roofs in view, obstacles, true best landing point per roof |
+//! | [`LABELS_TOPIC`] `/camera/labels` | `landing.v1.CameraImage` | 8-bit grayscale PNG, pixel value = class id |
+//!
+//! Messages of one frame share its sequence number and log time. The same seed gives a
+//! byte-identical file.
+
+use std::collections::BTreeMap;
+use std::io::Cursor;
+use std::path::Path;
+
+use landing_proto::v1;
+use nalgebra::Isometry3;
+use prost::Message;
+use rand::SeedableRng;
+use rand::rngs::SmallRng;
+
+use crate::SimError;
+use crate::camera::{CameraConfig, Intrinsics, Rendered, render};
+use crate::dataset::{encode_label_png, encode_rgb_png};
+use crate::flight::{FlightConfig, View, approach, lidar_pose};
+use crate::lidar::{LidarConfig, LidarPoint, scan};
+use crate::truth::{RoofTruth, TruthConfig, ground_truth};
+use crate::world::{World, WorldConfig};
+
+pub const FRAME_TOPIC: &str = "/frame";
+pub const TRUTH_TOPIC: &str = "/ground_truth";
+pub const LABELS_TOPIC: &str = "/camera/labels";
+
+/// Bytes per packed point: x, y, z, intensity (FLOAT32) and class (UINT8).
+pub const POINT_STRIDE: u32 = 17;
+
+/// Start time of every recording (2026-01-01T00:00:00Z), so that files are reproducible.
+pub const START_UNIX_S: i64 = 1_767_225_600;
+
+/// What to record.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordConfig {
+    pub seed: u64,
+    pub world: WorldConfig,
+    pub flight: FlightConfig,
+    pub width: u32,
+    pub height: u32,
+    pub camera: CameraConfig,
+    pub lidar: LidarConfig,
+    pub truth: TruthConfig,
+    /// Roof to approach; `None` picks the one with the most assets.
+    pub building: Option<usize>,
+    pub drone_id: String,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            world: WorldConfig::default(),
+            flight: FlightConfig::default(),
+            width: 320,
+            height: 240,
+            camera: CameraConfig::default(),
+            lidar: LidarConfig::default(),
+            truth: TruthConfig::default(),
+            building: None,
+            drone_id: "sim-1".to_string(),
+        }
+    }
+}
+
+/// One simulated frame, before encoding.
+#[derive(Debug, Clone)]
+pub struct SimFrame {
+    pub sequence: u64,
+    pub view: View,
+    pub lidar_pose: Isometry3<f64>,
+    pub intrinsics: Intrinsics,
+    pub image: Rendered,
+    pub points: Vec<LidarPoint>,
+    pub roofs: Vec<RoofTruth>,
+}
+
+/// The roof with the most assets (ties: the lowest index).
+pub fn busiest_roof(world: &World) -> usize {
+    (0..world.buildings.len())
+        .max_by_key(|&i| (world.buildings[i].assets.len(), std::cmp::Reverse(i)))
+        .unwrap_or(0)
+}
+
+/// Simulates the frames of a flight (camera, LiDAR and ground truth), without encoding them.
+pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimError> {
+    let world = World::generate(config.seed, &config.world)?;
+    if world.buildings.is_empty() {
+        return Err(SimError::invalid("world", "no buildings", "the city has no building to approach"));
+    }
+    let building = config.building.unwrap_or_else(|| busiest_roof(&world));
+    if building >= world.buildings.len() {
+        return Err(SimError::invalid("building", building, "is not a building of this world"));
+    }
+    let intrinsics = Intrinsics::from_hfov(config.width, config.height, config.camera.hfov_deg)?;
+    let mut rng = SmallRng::seed_from_u64(config.seed ^ 0x666c_6967_6874);
+    let views = approach(&world, building, &config.flight, &mut rng);
+    let mut frames = Vec::with_capacity(views.len());
+    for (i, view) in views.into_iter().enumerate() {
+        let frame_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(i as u64);
+        let lp = lidar_pose(&view.camera);
+        let image = render(&world, &intrinsics, &view.camera, &config.camera, frame_seed);
+        let points = scan(&world, &lp, &config.lidar, frame_seed)?;
+        let roofs = ground_truth(&world, &points, building, &config.truth)?;
+        frames.push(SimFrame { sequence: i as u64, view, lidar_pose: lp, intrinsics, image, points, roofs });
+    }
+    Ok((world, frames))
+}
+
+/// Protobuf pose of an isometry.
+pub fn pose_to_proto(p: &Isometry3<f64>) -> v1::Pose {
+    let t = p.translation.vector;
+    let q = p.rotation.quaternion();
+    v1::Pose {
+        position: Some(v1::Vector3 { x: t.x, y: t.y, z: t.z }),
+        orientation: Some(v1::Quaternion { x: q.i, y: q.j, z: q.k, w: q.w }),
+    }
+}
+
+/// Isometry of a protobuf pose (identity when unset; the quaternion is normalised).
+pub fn pose_from_proto(p: Option<&v1::Pose>) -> Isometry3<f64> {
+    let Some(p) = p else { return Isometry3::identity() };
+    let t = p.position.clone().unwrap_or_default();
+    let q = p.orientation.clone().unwrap_or(v1::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
+    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
+    Isometry3::from_parts(nalgebra::Translation3::new(t.x, t.y, t.z), uq)
+}
+
+fn timestamp(sequence: u64, rate_hz: f64) -> prost_types::Timestamp {
+    let ns = (sequence as f64 / rate_hz * 1e9).round() as i64;
+    prost_types::Timestamp { seconds: START_UNIX_S + ns / 1_000_000_000, nanos: (ns % 1_000_000_000) as i32 }
+}
+
+fn ring(points: &[[f64; 2]], z: f64) -> v1::LinearRing {
+    v1::LinearRing { points: points.iter().map(|p| v1::Vector3 { x: p[0], y: p[1], z }).collect() }
+}
+
+/// Packs points (LiDAR frame) as x, y, z, intensity FLOAT32 + class UINT8, stride 17.
+pub fn pack_points(points: &[LidarPoint]) -> Vec<u8> {
+    let mut data = Vec::with_capacity(points.len() * POINT_STRIDE as usize);
+    for p in points {
+        for v in [p.local[0], p.local[1], p.local[2], p.intensity] {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        data.push(p.class);
+    }
+    data
+}
+
+fn fields() -> Vec<v1::PackedElementField> {
+    let f = |name: &str, offset: u32, t: v1::NumericType| v1::PackedElementField {
+        name: name.to_string(),
+        offset,
+        r#type: t as i32,
+    };
+    vec![
+        f("x", 0, v1::NumericType::Float32),
+        f("y", 4, v1::NumericType::Float32),
+        f("z", 8, v1::NumericType::Float32),
+        f("intensity", 12, v1::NumericType::Float32),
+        f("class", 16, v1::NumericType::Uint8),
+    ]
+}
+
+fn calibration(i: &Intrinsics) -> v1::CameraCalibration {
+    v1::CameraCalibration { width: i.width, height: i.height, fx: i.fx, fy: i.fy, cx: i.cx, cy: i.cy }
+}
+
+/// The three messages of a frame: Frame, GroundTruth and the label image.
+pub fn frame_messages(
+    world: &World,
+    f: &SimFrame,
+    config: &RecordConfig,
+) -> Result<(v1::Frame, v1::GroundTruth, v1::CameraImage), SimError> {
+    let ts = timestamp(f.sequence, config.flight.rate_hz);
+    let cam_pose = pose_to_proto(&f.view.camera);
+    let lidar_pose = pose_to_proto(&f.lidar_pose);
+    let frame = v1::Frame {
+        drone_id: config.drone_id.clone(),
+        sequence: f.sequence,
+        timestamp: Some(ts),
+        point_cloud: Some(v1::PointCloud {
+            timestamp: Some(ts),
+            frame_id: "lidar".to_string(),
+            pose: Some(lidar_pose.clone()),
+            point_stride: POINT_STRIDE,
+            fields: fields(),
+            data: pack_points(&f.points),
+        }),
+        image: Some(v1::CameraImage {
+            timestamp: Some(ts),
+            frame_id: "camera".to_string(),
+            pose: Some(cam_pose.clone()),
+            calibration: Some(calibration(&f.intrinsics)),
+            image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
+                data: encode_rgb_png(&f.image)?,
+                format: "png".to_string(),
+            })),
+        }),
+        geodetic_origin: None,
+    };
+    let labels = v1::CameraImage {
+        timestamp: Some(ts),
+        frame_id: "camera".to_string(),
+        pose: Some(cam_pose.clone()),
+        calibration: Some(calibration(&f.intrinsics)),
+        image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
+            data: encode_label_png(&f.image)?,
+            format: "png".to_string(),
+        })),
+    };
+    let roofs = f
+        .roofs
+        .iter()
+        .map(|r| v1::RoofTruth {
+            building: r.building as u32,
+            outline: Some(ring(&r.outline, r.height_m)),
+            height_m: r.height_m,
+            parapet_height_m: r.parapet_height_m,
+            obstacles: r
+                .obstacles
+                .iter()
+                .map(|o| v1::ObstacleTruth {
+                    asset: o.kind.name().to_string(),
+                    semantic_class: i32::from(o.class),
+                    footprint: Some(ring(&o.footprint, r.height_m)),
+                    height_m: o.height_m,
+                    seen_by_lidar: o.seen_by_lidar,
+                })
+                .collect(),
+            landable_region: Some(v1::Polygon {
+                shell: Some(ring(&r.landable_region.shell, r.height_m)),
+                holes: r.landable_region.holes.iter().map(|h| ring(h, r.height_m)).collect(),
+                plane_height_m: r.height_m,
+            }),
+            best_landing_point: Some(v1::Vector3 { x: r.best_point[0], y: r.best_point[1], z: r.height_m }),
+            best_safe_radius_m: r.best_radius_m,
+            lidar_point_count: r.lidar_points as u32,
+        })
+        .collect();
+    let truth = v1::GroundTruth {
+        sequence: f.sequence,
+        timestamp: Some(ts),
+        world_seed: world.seed,
+        target_building: f.view.building as u32,
+        roofs,
+        camera_pose: Some(cam_pose),
+        lidar_pose: Some(lidar_pose),
+    };
+    Ok((frame, truth, labels))
+}
+
+fn mcap_err(e: mcap::McapError) -> SimError {
+    SimError::Mcap(e.to_string())
+}
+
+/// Simulates a flight and writes it as an MCAP file (zstd chunks). Returns the frame count.
+pub fn write_recording(config: &RecordConfig, path: &Path) -> Result<usize, SimError> {
+    let (world, frames) = simulate(config)?;
+    let bytes = encode_recording(&world, &frames, config)?;
+    std::fs::write(path, bytes).map_err(|e| SimError::io(path, e))?;
+    Ok(frames.len())
+}
+
+/// Encodes simulated frames as MCAP bytes.
+pub fn encode_recording(world: &World, frames: &[SimFrame], config: &RecordConfig) -> Result<Vec<u8>, SimError> {
+    let opts = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        .profile("")
+        .library("landing-sim");
+    let mut w = opts.create(Cursor::new(Vec::new())).map_err(mcap_err)?;
+    let fds = landing_proto::FILE_DESCRIPTOR_SET;
+    let meta = BTreeMap::new();
+    let frame_schema = w.add_schema("landing.v1.Frame", "protobuf", fds).map_err(mcap_err)?;
+    let truth_schema = w.add_schema("landing.v1.GroundTruth", "protobuf", fds).map_err(mcap_err)?;
+    let image_schema = w.add_schema("landing.v1.CameraImage", "protobuf", fds).map_err(mcap_err)?;
+    let frame_ch = w.add_channel(frame_schema, FRAME_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
+    let truth_ch = w.add_channel(truth_schema, TRUTH_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
+    let label_ch = w.add_channel(image_schema, LABELS_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
+    for f in frames {
+        let (frame, truth, labels) = frame_messages(world, f, config)?;
+        let ts = frame.timestamp.unwrap_or_default();
+        let t = (ts.seconds as u64) * 1_000_000_000 + ts.nanos as u64;
+        for (ch, data) in [(frame_ch, frame.encode_to_vec()), (truth_ch, truth.encode_to_vec()), (label_ch, labels.encode_to_vec())] {
+            let header = mcap::records::MessageHeader {
+                channel_id: ch,
+                sequence: f.sequence as u32,
+                log_time: t,
+                publish_time: t,
+            };
+            w.write_to_known_channel(&header, &data).map_err(mcap_err)?;
+        }
+    }
+    w.finish().map_err(mcap_err)?;
+    Ok(w.into_inner().into_inner())
+}
+
+/// One frame read back from a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedFrame {
+    pub frame: v1::Frame,
+    pub truth: Option<v1::GroundTruth>,
+    pub labels: Option<v1::CameraImage>,
+}
+
+/// Reads every frame of an MCAP file written by [`write_recording`], in sequence order, with
+/// the ground truth and label image of the same sequence number.
+pub fn read_recording(path: &Path) -> Result<Vec<RecordedFrame>, SimError> {
+    let bytes = std::fs::read(path).map_err(|e| SimError::io(path, e))?;
+    read_recording_bytes(&bytes)
+}
+
+/// Like [`read_recording`], from bytes.
+pub fn read_recording_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, SimError> {
+    let mut frames: BTreeMap<u64, v1::Frame> = BTreeMap::new();
+    let mut truths: BTreeMap<u64, v1::GroundTruth> = BTreeMap::new();
+    let mut labels: BTreeMap<u64, v1::CameraImage> = BTreeMap::new();
+    let dec = |what: &str, e: prost::DecodeError| SimError::Decode { what: what.to_string(), reason: e.to_string() };
+    for msg in mcap::MessageStream::new(bytes).map_err(mcap_err)? {
+        let msg = msg.map_err(mcap_err)?;
+        match msg.channel.topic.as_str() {
+            FRAME_TOPIC => {
+                let f = v1::Frame::decode(&*msg.data).map_err(|e| dec(FRAME_TOPIC, e))?;
+                frames.insert(f.sequence, f);
+            }
+            TRUTH_TOPIC => {
+                let t = v1::GroundTruth::decode(&*msg.data).map_err(|e| dec(TRUTH_TOPIC, e))?;
+                truths.insert(t.sequence, t);
+            }
+            LABELS_TOPIC => {
+                let l = v1::CameraImage::decode(&*msg.data).map_err(|e| dec(LABELS_TOPIC, e))?;
+                labels.insert(u64::from(msg.sequence), l);
+            }
+            _ => {}
+        }
+    }
+    Ok(frames
+        .into_iter()
+        .map(|(seq, frame)| RecordedFrame { frame, truth: truths.remove(&seq), labels: labels.remove(&seq) })
+        .collect())
+}
+
+/// The (Frame, GroundTruth) pairs of a recording; frames without ground truth are skipped.
+pub fn read_pairs(path: &Path) -> Result<Vec<(v1::Frame, v1::GroundTruth)>, SimError> {
+    Ok(read_recording(path)?
+        .into_iter()
+        .filter_map(|r| r.truth.map(|t| (r.frame, t)))
+        .collect())
+}
+
+/// Writes points (world coordinates) as a binary little-endian PLY with `x y z` float and
+/// `class` uchar.
+pub fn write_ply(points: &[LidarPoint], path: &Path) -> Result<(), SimError> {
+    let mut out = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment landing-sim LiDAR scan, world coordinates (ENU, metres)\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar class\nend_header\n",
+        points.len()
+    )
+    .into_bytes();
+    for p in points {
+        for v in p.world {
+            out.extend_from_slice(&(v as f32).to_le_bytes());
+        }
+        out.push(p.class);
+    }
+    std::fs::write(path, out).map_err(|e| SimError::io(path, e))
+}

@@ -1,0 +1,14 @@
+//! End-to-end tests: the real `landing-server` on `127.0.0.1:0`, real simulated recordings, and
+//! the client SDK and `landing` CLI over loopback gRPC. One binary, a module per topic; most
+//! tests go through [`support::check`].
+
+mod support;
+
+mod cli;
+mod detect;
+mod errors;
+mod health_reflection;
+mod overload;
+mod security;
+mod shutdown;
+mod stream;
