@@ -21,12 +21,15 @@
 #                 in-image paths), health SERVING for "" and landing.v1.LandingService, `landing
 #                 replay samples/rooftops.mcap`, /metrics scraped, SIGTERM drains and exits 0;
 #                 then SIGTERM during a replay: every frame sent before the drain is answered
+#  10. cluster    the cpu render's ConfigMap (auth on): health without a token (the kubelet's
+#                 view), `landing info` without a token refused, replay with it; the tls render:
+#                 plaintext health fails, replay over TLS with the CA and the token works
 #
 # In-image paths and what replaces them on this machine (environment overrides only):
 #   /opt/landing/models/rooftop-segmentation.onnx  -> LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx
 #   ORT_DYLIB_PATH=/opt/onnxruntime/lib/...        -> ORT_DYLIB_PATH=.ort/libonnxruntime.so (scripts/setup-ort.sh)
 #   /var/run/secrets/landing/auth/tokens           -> LANDING__AUTH__TOKENS_FILE=<temp file with a token>
-#   /var/run/secrets/landing/tls/tls.{crt,key}     -> LANDING__TLS__{CERT,KEY}_PATH=<temp self-signed pair>
+#   /var/run/secrets/landing/tls/tls.{crt,key}     -> LANDING__TLS__{CERT,KEY}_PATH=<temp CA-signed pair>
 # If port 50051 or 9464 is taken on this machine, serve moves to a free loopback port
 # (LANDING__SERVER__LISTEN / METRICS_LISTEN) and says so.
 #
@@ -127,13 +130,21 @@ build() {
   bash scripts/setup-ort.sh
 }
 
-# Self-signed certificate and a token file standing in for the Secrets.
+# A token file and a CA-signed server certificate (as cert-manager would issue) standing in for
+# the Secrets; webpki refuses a self-signed CA certificate as a server's.
 make_stand_ins() {
+  [ -f "$work/tls.crt" ] && return 0
   printf 'deploy-check-token\n' > "$work/tokens"
-  openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj "/CN=landing-server" \
-    -addext "subjectAltName=DNS:landing-server,IP:127.0.0.1" \
-    -keyout "$work/tls.key" -out "$work/tls.crt" > /dev/null 2>&1
-}
+  local ext="$work/server.ext"
+  printf '%s\n' "subjectAltName=DNS:landing-server,IP:127.0.0.1" "basicConstraints=critical,CA:FALSE" \
+    "keyUsage=critical,digitalSignature" "extendedKeyUsage=serverAuth" > "$ext"
+  openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 1 \
+      -subj "/CN=deploy-check CA" -keyout "$work/ca.key" -out "$work/ca.crt" \
+    && openssl req -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes \
+      -subj "/CN=landing-server" -keyout "$work/tls.key" -out "$work/tls.csr" \
+    && openssl x509 -req -in "$work/tls.csr" -CA "$work/ca.crt" -CAkey "$work/ca.key" \
+      -CAcreateserial -days 1 -extfile "$ext" -out "$work/tls.crt"
+} > /dev/null 2>&1
 
 # local_env FILE: the in-image paths among FILE's LANDING__* lines mapped to local stand-ins, plus
 # the model and library overrides every check-config run needs.
@@ -147,7 +158,8 @@ local_env() {
     case "$key" in
       LANDING__SEGMENTATION__MODEL_PATH) ;;
       LANDING__AUTH__TOKENS_FILE) echo "$key=$work/tokens" ;;
-      LANDING__TLS__CERT_PATH|LANDING__TLS__CLIENT_CA_PATH) echo "$key=$work/tls.crt" ;;
+      LANDING__TLS__CERT_PATH) echo "$key=$work/tls.crt" ;;
+      LANDING__TLS__CLIENT_CA_PATH) echo "$key=$work/ca.crt" ;;
       LANDING__TLS__KEY_PATH) echo "$key=$work/tls.key" ;;
       *) echo "$key=$value" ;;
     esac
@@ -212,6 +224,13 @@ PY
 
 free_port() {
   "$py" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])'
+}
+
+# count_lines PATTERN FILE: matching lines, 0 when the file does not exist (yet).
+count_lines() {
+  local n
+  n=$(grep -c -- "$1" "$2" 2>/dev/null)
+  echo "${n:-0}"
 }
 
 # start_server LOG: the deploy config with the in-image path overrides (and moved ports if taken).
@@ -291,15 +310,16 @@ PY
     "$bin_dir/landing" replay samples/rooftops.mcap --server "http://$addr" --rate 5 \
       --jsonl "$work/drain.jsonl" > "$work/drain.out" 2>&1 &
     local client_pid=$! polls=0
-    # SIGTERM once a couple of frames are answered (the client may be slow to start on a busy box).
-    while [ "$(cat "$work/drain.jsonl" 2>/dev/null | grep -c .)" -lt 2 ] && kill -0 "$client_pid" 2>/dev/null \
+    # SIGTERM once a couple of frames are answered (the client may be slow to start on a busy box);
+    # the client prints a line per answer as it comes (the JSON lines are written at the end).
+    while [ "$(count_lines '^frame' "$work/drain.out")" -lt 2 ] && kill -0 "$client_pid" 2>/dev/null \
       && [ $polls -lt 300 ]; do
       sleep 0.1; polls=$((polls + 1))
     done
     stop_server || rc=1
     wait "$client_pid"; local client_status=$?
     local answered sent
-    answered=$(cat "$work/drain.jsonl" 2>/dev/null | grep -c .)
+    answered=$(count_lines . "$work/drain.jsonl")
     sent=$(sed -n 's/.*frame \([0-9][0-9]*\) was not sent.*/\1/p' "$work/drain.out" | head -n 1)
     echo "client exit status $client_status; $answered answers; $(tail -n 1 "$work/drain.out")"
     if [ "$answered" -lt 1 ]; then
@@ -317,6 +337,60 @@ PY
   return $rc
 }
 
+# The ConfigMaps as the pods run them (auth on; TLS with the tls component), with local stand-ins
+# for the Secrets and loopback ports (each pod has its own network namespace; this machine has one).
+cluster_configs() {
+  local rc=0 render envs grpc_port metrics_port
+  make_stand_ins || { echo "openssl could not make a test certificate"; return 1; }
+  for render in cpu "cpu+tls+servicemonitor"; do
+    envs=$(mktemp -p "$work")
+    cp "$work/renders/$render/env" "$envs"
+    echo "LANDING__AUTH__TOKENS_FILE=in-image" >> "$envs"
+    grpc_port=$(free_port)
+    metrics_port=$(free_port)
+    addr="127.0.0.1:$grpc_port"
+    mapfile -t serve_env < <(local_env "$envs")
+    serve_env+=("LANDING__SERVER__LISTEN=$addr" "LANDING__SERVER__METRICS_LISTEN=127.0.0.1:$metrics_port")
+    echo "-- render $render: ConfigMap server.toml + env $(tr '\n' ' ' < "$work/renders/$render/env")on $addr"
+    env "${serve_env[@]}" "$bin_dir/landing-server" serve --config "$work/renders/$render/server.toml" \
+      > "$work/server-$render.log" 2>&1 &
+    server_pid=$!
+    if [ "$render" = cpu ]; then
+      # What the kubelet's gRPC probes see: health needs no token.
+      "$py" deploy/validate.py health "$addr" --service landing.v1.LandingService --timeout 120 || rc=1
+      "$bin_dir/landing" info --server "http://$addr" > "$work/noauth.out" 2>&1
+      local status=$?
+      if [ $status -eq 6 ]; then echo "no token: refused (exit 6)"; else echo "no token: exit $status, expected 6"; cat "$work/noauth.out"; rc=1; fi
+      if "$bin_dir/landing" replay samples/rooftops.mcap --server "http://$addr" --token deploy-check-token \
+        > "$work/auth.out" 2>&1; then
+        echo "with the token: $(tail -n 1 "$work/auth.out")"
+      else
+        cat "$work/auth.out"; rc=1
+      fi
+    else
+      # TLS: the port answers TCP (the component's probes), plaintext gRPC health does not (why the
+      # component replaces the kubelet's gRPC probes), and a client that trusts the CA gets in.
+      local tries=0
+      until "$py" -c "import socket, sys; socket.create_connection(('127.0.0.1', int(sys.argv[1])), 1)" "$grpc_port" 2>/dev/null \
+        || [ $tries -ge 600 ]; do sleep 0.2; tries=$((tries + 1)); done
+      if "$py" deploy/validate.py health "$addr" --timeout 3 > /dev/null 2>&1; then
+        echo "plaintext health answered on a TLS port"; rc=1
+      else
+        echo "plaintext gRPC health fails on the TLS port, as expected (hence TCP probes)"
+      fi
+      if "$bin_dir/landing" replay samples/rooftops.mcap --server "https://$addr" --ca-cert "$work/ca.crt" \
+        --token deploy-check-token > "$work/tls.out" 2>&1; then
+        echo "over TLS with the CA and the token: $(tail -n 1 "$work/tls.out")"
+      else
+        cat "$work/tls.out"; rc=1
+      fi
+    fi
+    stop_server || rc=1
+    if [ $rc -ne 0 ]; then echo "--- server log (tail)"; tail -n 20 "$work/server-$render.log"; return $rc; fi
+  done
+  return $rc
+}
+
 # ---------------------------------------------------------------------------------------------
 step "tools (deploy/requirements.txt)" tools
 step "lint: hadolint (Dockerfiles), shellcheck (this script)" lint
@@ -329,6 +403,7 @@ if [ -z "${DEPLOY_CHECK_STATIC:-}" ]; then
   step "build: landing-server, landing (release)" build
   step "check-config: deploy config and every render's ConfigMap" check_config
   step "serve: deploy config serves samples/rooftops.mcap" serve
+  step "cluster configs: auth on, TLS component" cluster_configs
 fi
 
 echo "deploy: $passed passed, $failed failed"

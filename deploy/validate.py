@@ -62,7 +62,7 @@ CUSTOM_KINDS = {("monitoring.coreos.com/v1", "ServiceMonitor")}
 
 # The renders: name -> kustomization directory relative to deploy/k8s, plus components.
 OVERLAYS = ("cpu", "gpu")
-COMPONENTS = ("tls", "servicemonitor")
+COMPONENTS = ("tls", "servicemonitor", "networkpolicy")
 
 # The server config contract (shared with server/src/config.rs): section -> key -> type.
 CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -468,6 +468,16 @@ def check_render(r: Render, out_dir: Path | None) -> None:
         if "prometheus.io/scrape" in spec["template"]["metadata"].get("annotations", {}):
             r.fail("ServiceMonitor together with prometheus.io/scrape annotations scrapes every pod twice")
 
+    # NetworkPolicy: selects the pods and lets in the ports the Services use.
+    for np in r.of_kind("NetworkPolicy"):
+        npn = f"NetworkPolicy/{np['metadata']['name']}"
+        if not selector_matches(np["spec"].get("podSelector", {}).get("matchLabels", {}), pod_labels):
+            r.fail(f"{npn}: podSelector does not match the Deployment's pod labels")
+        allowed = {p.get("port") for rule in np["spec"].get("ingress", []) for p in rule.get("ports", [])}
+        for name, number in ports.items():
+            if name not in allowed and number not in allowed:
+                r.fail(f"{npn}: ingress does not allow the {name} port ({number})")
+
     # GPU variant: a GPU per pod, the CUDA provider, the GPU image.
     if r.name.startswith("gpu"):
         if str(res.get("limits", {}).get("nvidia.com/gpu", "")) != "1":
@@ -688,9 +698,13 @@ def mutations() -> list[tuple[str, str, object]]:
         ("cpu", "a CPU variant asks for a GPU", lambda o: ctr(o)["resources"]["limits"].update({"nvidia.com/gpu": 1})),
         ("gpu", "nvidia.com/gpu", lambda o: ctr(o)["resources"]["limits"].pop("nvidia.com/gpu")),
         ("gpu", "not cuda", lambda o: ctr(o).update(env=[e for e in ctr(o)["env"] if "EXECUTION_PROVIDER" not in e["name"]])),
-        ("gpu+tls+servicemonitor", "tcpSocket", lambda o: ctr(o)["readinessProbe"].update(grpc={"port": 50051})),
-        ("gpu+tls+servicemonitor", "scrapes every pod twice", lambda o: dep(o)["spec"]["template"]["metadata"].setdefault("annotations", {}).update({"prometheus.io/scrape": "true"})),
-        ("gpu+tls+servicemonitor", "has port", lambda o: next(s for s in o if s["kind"] == "ServiceMonitor")["spec"]["endpoints"][0].update(port="prom")),
+        ("gpu+tls+servicemonitor+networkpolicy", "ingress does not allow the metrics port",
+         lambda o: next(n for n in o if n["kind"] == "NetworkPolicy")["spec"]["ingress"][0]["ports"].pop()),
+        ("gpu+tls+servicemonitor+networkpolicy", "podSelector",
+         lambda o: next(n for n in o if n["kind"] == "NetworkPolicy")["spec"]["podSelector"]["matchLabels"].update(app="x")),
+        ("gpu+tls+servicemonitor+networkpolicy", "tcpSocket", lambda o: ctr(o)["readinessProbe"].update(grpc={"port": 50051})),
+        ("gpu+tls+servicemonitor+networkpolicy", "scrapes every pod twice", lambda o: dep(o)["spec"]["template"]["metadata"].setdefault("annotations", {}).update({"prometheus.io/scrape": "true"})),
+        ("gpu+tls+servicemonitor+networkpolicy", "has port", lambda o: next(s for s in o if s["kind"] == "ServiceMonitor")["spec"]["endpoints"][0].update(port="prom")),
     ]
 
 
@@ -711,7 +725,8 @@ def selftest(scratch: Path) -> int:
         if VERBOSE or not hit:
             print(f"selftest {status}: {name}: breaking '{fragment}' -> {hit[0] if hit else problems or 'no problem reported'}")
     failed += selftest_images(scratch)
-    total = len(mutations()) + len(IMAGE_MUTATIONS)
+    failed += selftest_extract_ort(scratch)
+    total = len(mutations()) + len(IMAGE_MUTATIONS) + 1
     print(f"selftest: {total - failed} passed, {failed} failed")
     return 1 if failed else 0
 
@@ -731,6 +746,42 @@ IMAGE_MUTATIONS = [
     ("config/server.toml", 'ort_library = ""', 'ort_library = ".ort/libonnxruntime.so"', "ort_library"),
     ("config/server.toml", "queue_capacity = 64", "queue_capacity = 32", "pipeline.queue_capacity is 32"),
 ]
+
+
+def selftest_extract_ort(scratch: Path) -> int:
+    """deploy/extract_ort.py on a wheel-shaped zip: the versioned library, the provider libraries
+    and the two symlinks come out, nothing else does, and a wrong version is refused."""
+    import zipfile
+
+    sys.dont_write_bytecode = True  # no __pycache__ inside deploy/
+    sys.path.insert(0, str(DEPLOY))
+    import extract_ort
+
+    wheel = scratch / "onnxruntime_gpu-1.31.1-cp311-cp311-manylinux_2_28_x86_64.whl"
+    with zipfile.ZipFile(wheel, "w") as z:
+        for name in ("libonnxruntime.so.1.31.1", "libonnxruntime_providers_shared.so",
+                     "libonnxruntime_providers_cuda.so", "onnxruntime_pybind11_state.so", "__init__.py"):
+            z.writestr(f"onnxruntime/capi/{name}", name)
+        z.writestr("onnxruntime/tools/libonnxruntime.so.1.31.1", "decoy")
+    dest = scratch / "ort-lib"
+    problems = []
+    written = extract_ort.extract(str(wheel), str(dest), "1.31.1")
+    if written != ["libonnxruntime.so.1.31.1", "libonnxruntime_providers_cuda.so", "libonnxruntime_providers_shared.so"]:
+        problems.append(f"extracted {written}")
+    for link in ("libonnxruntime.so", "libonnxruntime.so.1"):
+        if os.readlink(dest / link) != "libonnxruntime.so.1.31.1":
+            problems.append(f"{link} -> {os.readlink(dest / link)}")
+    if (dest / "libonnxruntime.so.1.31.1").read_text() != "libonnxruntime.so.1.31.1":
+        problems.append("the versioned library has the wrong content")
+    try:
+        extract_ort.extract(str(wheel), str(scratch / "ort-wrong"), "1.30.0")
+        problems.append("a wheel without libonnxruntime.so.1.30.0 was accepted for 1.30.0")
+    except SystemExit as e:
+        if "libonnxruntime.so.1.30.0" not in str(e):
+            problems.append(f"the refusal does not name the library: {e}")
+    if problems or VERBOSE:
+        print(f"selftest {'MISSED' if problems else 'ok'}: extract_ort.py: {'; '.join(problems) or 'extracts the libraries, refuses a wrong version'}")
+    return 1 if problems else 0
 
 
 def selftest_images(scratch: Path) -> int:

@@ -94,49 +94,57 @@ fn triangulate_deferring(
     let center = circumcenter(xy(i0), xy(i1), xy(i2));
     let center = if center[0].is_finite() && center[1].is_finite() { center } else { mid };
 
-    // Sweep order: distance from the seed circumcentre, ties by index (deterministic).
+    // Sweep order: distance from the seed circumcentre, ties by index (deterministic). The sweep
+    // then works on ranks in this order, over a copy of the coordinates in this order: points that
+    // meet in the sweep sit together in memory.
     let mut order: Vec<(u64, u32)> =
         (0..n).map(|i| (dist2(xy(i), center).to_bits(), i as u32)).collect();
     order.sort_unstable();
+    let coords: Vec<[f64; 2]> = order.iter().map(|&(_, i)| xy(i as usize)).collect();
+    let rank_of = |i: usize| order.iter().position(|&(_, j)| j as usize == i).unwrap_or(0) as u32;
+    let (r0, r1, r2) = (rank_of(i0), rank_of(i1), rank_of(i2));
 
-    let mut b = Builder::new(points, center);
-    b.seed(i0, i1, i2);
+    let mut b = Builder::new(&coords, center);
+    b.seed(r0, r1, r2);
+    let seeds = [coords[r0 as usize], coords[r1 as usize], coords[r2 as usize]];
     let mut deferred = Vec::new();
     let mut k = 0;
     while k < n {
         // Points at exactly the same distance form a (usually one-long) run; exact duplicates
-        // within a run are skipped here, the first index kept.
+        // within a run are skipped here, the smallest index kept.
         let mut end = k + 1;
         while end < n && order[end].0 == order[k].0 {
             end += 1;
         }
-        for j in k..end {
-            let i = order[j].1 as usize;
-            if i == i0 || i == i1 || i == i2 {
+        for r in k..end {
+            let r32 = r as u32;
+            if r32 == r0 || r32 == r1 || r32 == r2 {
                 continue;
             }
-            let p = xy(i);
-            let dup = (k..end).any(|m| {
-                let o = order[m].1 as usize;
-                o < i && xy(o) == p
-            }) || p == xy(i0)
-                || p == xy(i1)
-                || p == xy(i2);
+            let p = coords[r];
+            let i = order[r].1;
+            let dup = seeds.contains(&p)
+                || (end - k > 1 && (k..end).any(|m| order[m].1 < i && coords[m] == p));
             if dup {
                 continue;
             }
-            if defer(i) || !b.add_outside(i)? {
-                deferred.push(i);
+            if defer(i as usize) || !b.add_outside(r32)? {
+                deferred.push(r32);
             }
         }
         k = end;
     }
-    for i in deferred {
-        b.add_inside(i)?;
+    for r in deferred {
+        b.add_inside(r)?;
     }
-    b.triangles.shrink_to_fit();
-    b.halfedges.shrink_to_fit();
-    Ok(Triangulation { triangles: b.triangles, halfedges: b.halfedges })
+    let mut triangles = b.triangles;
+    for v in &mut triangles {
+        *v = order[*v as usize].1;
+    }
+    triangles.shrink_to_fit();
+    let mut halfedges = b.halfedges;
+    halfedges.shrink_to_fit();
+    Ok(Triangulation { triangles, halfedges })
 }
 
 #[inline]
@@ -152,6 +160,34 @@ fn orient(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> f64 {
         robust::Coord { x: b[0], y: b[1] },
         robust::Coord { x: c[0], y: c[1] },
     )
+}
+
+/// `robust::incircle`'s sign: positive when `d` is inside the circle through the counter-clockwise
+/// `a`, `b`, `c`. The same floating-point filter as `robust` (Shewchuk's bound), inlined here
+/// because it runs once per flip candidate; uncertain cases go to the exact adaptive version.
+#[inline(always)]
+fn incircle(a: [f64; 2], b: [f64; 2], c: [f64; 2], d: [f64; 2]) -> f64 {
+    const EPSILON: f64 = f64::EPSILON / 2.0;
+    const ICCERRBOUND_A: f64 = (10.0 + 96.0 * EPSILON) * EPSILON;
+    let (adx, ady) = (a[0] - d[0], a[1] - d[1]);
+    let (bdx, bdy) = (b[0] - d[0], b[1] - d[1]);
+    let (cdx, cdy) = (c[0] - d[0], c[1] - d[1]);
+    let (bdxcdy, cdxbdy) = (bdx * cdy, cdx * bdy);
+    let (cdxady, adxcdy) = (cdx * ady, adx * cdy);
+    let (adxbdy, bdxady) = (adx * bdy, bdx * ady);
+    let alift = adx * adx + ady * ady;
+    let blift = bdx * bdx + bdy * bdy;
+    let clift = cdx * cdx + cdy * cdy;
+    let det = alift * (bdxcdy - cdxbdy) + blift * (cdxady - adxcdy) + clift * (adxbdy - bdxady);
+    let permanent = (bdxcdy.abs() + cdxbdy.abs()) * alift
+        + (cdxady.abs() + adxcdy.abs()) * blift
+        + (adxbdy.abs() + bdxady.abs()) * clift;
+    let errbound = ICCERRBOUND_A * permanent;
+    if det > errbound || -det > errbound {
+        return det;
+    }
+    let k = |p: [f64; 2]| robust::Coord { x: p[0], y: p[1] };
+    robust::incircle(k(a), k(b), k(c), k(d))
 }
 
 #[inline]
@@ -172,7 +208,8 @@ fn circumcenter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> [f64; 2] {
 
 /// The growing triangulation and its convex hull.
 struct Builder<'a> {
-    points: &'a [[f64; 3]],
+    /// Coordinates in sweep order; the builder's point numbers are ranks in this order.
+    points: &'a [[f64; 2]],
     triangles: Vec<u32>,
     halfedges: Vec<u32>,
     /// Counter-clockwise hull as a linked list over point indices; `next[v] == v` marks a point
@@ -192,7 +229,7 @@ struct Builder<'a> {
 }
 
 impl<'a> Builder<'a> {
-    fn new(points: &'a [[f64; 3]], center: [f64; 2]) -> Self {
+    fn new(points: &'a [[f64; 2]], center: [f64; 2]) -> Self {
         let n = points.len();
         let hash_size = ((n as f64).sqrt().ceil() as usize).max(1);
         let flip_budget = 64 * n + 1024;
@@ -213,8 +250,7 @@ impl<'a> Builder<'a> {
 
     #[inline]
     fn xy(&self, i: u32) -> [f64; 2] {
-        let p = self.points[i as usize];
-        [p[0], p[1]]
+        self.points[i as usize]
     }
 
     fn hash_key(&self, p: [f64; 2]) -> usize {
@@ -225,8 +261,7 @@ impl<'a> Builder<'a> {
         ((a * size as f64).floor() as usize) % size
     }
 
-    fn seed(&mut self, i0: usize, i1: usize, i2: usize) {
-        let (i0, i1, i2) = (i0 as u32, i1 as u32, i2 as u32);
+    fn seed(&mut self, i0: u32, i1: u32, i2: u32) {
         for (v, next, prev) in [(i0, i1, i2), (i1, i2, i0), (i2, i0, i1)] {
             self.hull_next[v as usize] = next;
             self.hull_prev[v as usize] = prev;
@@ -261,8 +296,8 @@ impl<'a> Builder<'a> {
 
     /// Adds point `i` if it lies strictly outside the current hull; returns false (and changes
     /// nothing) if it does not.
-    fn add_outside(&mut self, i: usize) -> Result<bool, GeometryError> {
-        let p = self.xy(i as u32);
+    fn add_outside(&mut self, i: u32) -> Result<bool, GeometryError> {
+        let p = self.xy(i);
         let key = self.hash_key(p);
         let size = self.hash.len();
         let mut start = EMPTY;
@@ -293,7 +328,6 @@ impl<'a> Builder<'a> {
                 return Err(GeometryError::IterationLimit { step: "hull walk", limit: guard });
             }
         }
-        let i = i as u32;
         let n0 = self.hull_next[e as usize];
         let t = self.add_triangle(e, i, n0, EMPTY, EMPTY, self.hull_tri[e as usize]);
         self.hull_tri[i as usize] = t + 1;
@@ -340,8 +374,8 @@ impl<'a> Builder<'a> {
 
     /// Adds point `i`, which lies inside or on the hull: walk to its triangle, split it (or the edge
     /// the point is on), flip. A point equal to an existing vertex is skipped.
-    fn add_inside(&mut self, i: usize) -> Result<(), GeometryError> {
-        let p = self.xy(i as u32);
+    fn add_inside(&mut self, i: u32) -> Result<(), GeometryError> {
+        let p = self.xy(i);
         // Start from the hull edge nearest in angle: late points lie near the hull.
         let key = self.hash_key(p);
         let size = self.hash.len();
@@ -386,7 +420,6 @@ impl<'a> Builder<'a> {
             return Ok(()); // duplicate
         }
         let on_edge = (0..3).find(|&k| orient(self.xy(v[k]), self.xy(v[(k + 1) % 3]), p) == 0.0);
-        let i = i as u32;
         match on_edge {
             None => self.split_triangle(t, i),
             Some(k) => self.split_edge(3 * t + k, i),
@@ -486,11 +519,7 @@ impl<'a> Builder<'a> {
             let pr = self.triangles[a];
             let pl = self.triangles[al];
             let p1 = self.triangles[bl];
-            let c = |v: u32| {
-                let p = self.points[v as usize];
-                robust::Coord { x: p[0], y: p[1] }
-            };
-            if robust::incircle(c(pr), c(pl), c(p0), c(p1)) <= 0.0 {
+            if incircle(self.xy(pr), self.xy(pl), self.xy(p0), self.xy(p1)) <= 0.0 {
                 continue;
             }
             if self.flips_left == 0 {

@@ -8,7 +8,7 @@ use clap::{Args, Parser, Subcommand};
 use landing_geometry::Params;
 
 use crate::config::Config;
-use crate::detect::{detect_ply, to_json, to_table};
+use crate::detect::{detect_ply, detect_recording, to_json, to_table};
 use crate::pipeline::{FrameOptions, Pipeline, SegmentationMode};
 
 /// Rooftop landing-site service.
@@ -55,8 +55,22 @@ pub struct ServeArgs {
 #[derive(Debug, Args)]
 pub struct DetectArgs {
     /// PLY point cloud (ascii or binary little-endian; x y z, optional class/label).
-    #[arg(long, value_name = "FILE.ply")]
-    pub points: PathBuf,
+    #[arg(long, value_name = "FILE.ply", required_unless_present = "recording", conflicts_with = "recording")]
+    pub points: Option<PathBuf>,
+    /// MCAP recording of frames (image + cloud + poses), as written by the simulator.
+    #[arg(long, value_name = "FILE.mcap")]
+    pub recording: Option<PathBuf>,
+    /// Sequence number of the recorded frame to use (default: the first frame).
+    #[arg(long, value_name = "K", requires = "recording")]
+    pub frame: Option<u64>,
+    /// Where point classes come from: auto (model if an image and a model, else the cloud's
+    /// classes, else none), model, point-classes or none.
+    #[arg(long, value_enum, default_value_t = ModeArg::Auto)]
+    pub segmentation: ModeArg,
+    /// ONNX segmentation model. Default for recordings: models/rooftop-segmentation.onnx when that
+    /// file exists (always tried with --segmentation model).
+    #[arg(long, value_name = "FILE.onnx")]
+    pub model: Option<PathBuf>,
     /// l_max: triangles with a longer edge are dropped, metres.
     #[arg(long, value_name = "M")]
     pub l_max: Option<f64>,
@@ -78,12 +92,18 @@ pub struct DetectArgs {
     /// At most this many sites.
     #[arg(long, value_name = "N")]
     pub max_sites: Option<usize>,
-    /// Ignore the classes in the file (geometry only).
-    #[arg(long)]
-    pub ignore_classes: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// `--segmentation` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeArg {
+    Auto,
+    Model,
+    PointClasses,
+    None,
 }
 
 impl DetectArgs {
@@ -104,15 +124,34 @@ impl DetectArgs {
             max_sites: self.max_sites.unwrap_or(d.max_sites),
             ..d
         };
-        let segmentation_mode = if self.ignore_classes {
-            SegmentationMode::None
-        } else {
-            SegmentationMode::Auto
+        let segmentation_mode = match self.segmentation {
+            ModeArg::Auto => SegmentationMode::Auto,
+            ModeArg::Model => SegmentationMode::Model,
+            ModeArg::PointClasses => SegmentationMode::PointClasses,
+            ModeArg::None => SegmentationMode::None,
         };
-        FrameOptions {
-            params,
-            segmentation_mode,
+        FrameOptions { params, segmentation_mode }
+    }
+
+    /// The pipeline for this run: with the model when a recording may use it.
+    pub fn pipeline(&self) -> anyhow::Result<Pipeline> {
+        let mut pipeline = Pipeline::geometry_only(Params::default());
+        let default_model = crate::config::SegmentationConfig::default().model_path;
+        let model = match (&self.model, self.segmentation) {
+            (Some(m), _) => Some(m.clone()),
+            (None, ModeArg::Model) => Some(default_model),
+            (None, ModeArg::Auto) if self.recording.is_some() && default_model.is_file() => {
+                Some(default_model)
+            }
+            (None, _) => None,
+        };
+        if let Some(model_path) = model {
+            let config = crate::config::SegmentationConfig { model_path, ..Default::default() };
+            let segmenter = crate::segmentation::Segmenter::load(&config)
+                .with_context(|| format!("load the model {}", config.model_path.display()))?;
+            pipeline.segmenter = Some(std::sync::Arc::new(segmenter));
         }
+        Ok(pipeline)
     }
 }
 
@@ -151,9 +190,15 @@ where
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Detect(args) => {
-            let pipeline = Pipeline::geometry_only(Params::default());
-            let out = detect_ply(&args.points, &args.options(), &pipeline)
-                .with_context(|| format!("detect on {}", args.points.display()))?;
+            let pipeline = args.pipeline()?;
+            let options = args.options();
+            let out = match (&args.points, &args.recording) {
+                (Some(points), _) => detect_ply(points, &options, &pipeline)
+                    .with_context(|| format!("detect on {}", points.display()))?,
+                (None, Some(recording)) => detect_recording(recording, args.frame, &options, &pipeline)
+                    .with_context(|| format!("detect on {}", recording.display()))?,
+                (None, None) => anyhow::bail!("give --points FILE.ply or --recording FILE.mcap"),
+            };
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&to_json(&out))?);
             } else {

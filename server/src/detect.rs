@@ -36,6 +36,28 @@ pub fn detect_ply(
     run_pipeline(&frame, options, pipeline)
 }
 
+/// Reads the MCAP recording at `path` and runs the pipeline on the frame with sequence number
+/// `sequence` (the first frame when `None`): image, cloud and poses, as the service would.
+pub fn detect_recording(
+    path: &Path,
+    sequence: Option<u64>,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+) -> Result<FrameOutput, Error> {
+    let io = |reason: String| Error::Io { path: path.display().to_string(), reason };
+    let frames = landing_sim::recording::read_recording(path).map_err(|e| io(e.to_string()))?;
+    let recorded = match sequence {
+        Some(k) => frames.iter().find(|r| r.frame.sequence == k).ok_or_else(|| {
+            let first = frames.first().map_or(0, |r| r.frame.sequence);
+            let last = frames.last().map_or(0, |r| r.frame.sequence);
+            io(format!("no frame with sequence {k}; it has {} frames, sequences {first}..={last}", frames.len()))
+        })?,
+        None => frames.first().ok_or_else(|| io("the recording has no frame".into()))?,
+    };
+    let frame = Frame::try_from(&recorded.frame)?;
+    run_pipeline(&frame, options, pipeline)
+}
+
 /// The result as the JSON document of `detect --json`.
 pub fn to_json(out: &FrameOutput) -> serde_json::Value {
     let sites: Vec<_> = out

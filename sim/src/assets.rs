@@ -138,7 +138,10 @@ pub enum AssetDistribution {
 
 impl AssetDistribution {
     /// The training-world default.
-    pub const TRAINING: AssetDistribution = AssetDistribution::Uniform { min_total: 2, max_total: 9 };
+    pub const TRAINING: AssetDistribution = AssetDistribution::Uniform {
+        min_total: 2,
+        max_total: 9,
+    };
 }
 
 /// Draws the asset counts of one building, indexed like [`AssetKind::ALL`].
@@ -155,7 +158,10 @@ pub fn sample_counts<R: Rng + ?Sized>(dist: AssetDistribution, rng: &mut R) -> [
                 counts[i] = sample_kde(kind.histogram(), rng);
             }
         }
-        AssetDistribution::Uniform { min_total, max_total } => {
+        AssetDistribution::Uniform {
+            min_total,
+            max_total,
+        } => {
             let hi = max_total.max(min_total);
             let total = rng.random_range(min_total..=hi);
             for _ in 0..total {
@@ -181,9 +187,16 @@ fn sample_histogram<R: Rng + ?Sized>(hist: &[(u32, u32)], rng: &mut R) -> u32 {
 /// Kernel density bandwidth by Scott's rule for the histogram's data (n samples).
 pub fn kde_bandwidth(hist: &[(u32, u32)]) -> f64 {
     let n: f64 = hist.iter().map(|&(_, w)| f64::from(w)).sum();
-    let mean: f64 = hist.iter().map(|&(c, w)| f64::from(c) * f64::from(w)).sum::<f64>() / n;
-    let var: f64 =
-        hist.iter().map(|&(c, w)| f64::from(w) * (f64::from(c) - mean).powi(2)).sum::<f64>() / n;
+    let mean: f64 = hist
+        .iter()
+        .map(|&(c, w)| f64::from(c) * f64::from(w))
+        .sum::<f64>()
+        / n;
+    let var: f64 = hist
+        .iter()
+        .map(|&(c, w)| f64::from(w) * (f64::from(c) - mean).powi(2))
+        .sum::<f64>()
+        / n;
     1.06 * var.sqrt() * n.powf(-0.2)
 }
 
@@ -216,7 +229,11 @@ mod tests {
     fn histograms_have_table_iii_means() {
         for kind in AssetKind::ALL {
             let got = kind.histogram_mean();
-            assert!((got - kind.table_iii_mean()).abs() < 1e-12, "{}: {got}", kind.name());
+            assert!(
+                (got - kind.table_iii_mean()).abs() < 1e-12,
+                "{}: {got}",
+                kind.name()
+            );
         }
     }
 
@@ -239,7 +256,9 @@ mod tests {
             let h = kind.histogram();
             let var = h
                 .iter()
-                .map(|&(c, w)| f64::from(w) / 100.0 * (f64::from(c) - kind.histogram_mean()).powi(2))
+                .map(|&(c, w)| {
+                    f64::from(w) / 100.0 * (f64::from(c) - kind.histogram_mean()).powi(2)
+                })
                 .sum::<f64>();
             let tol = 4.0 * (var / n as f64).sqrt();
             assert!(
@@ -270,9 +289,16 @@ mod tests {
         for (i, kind) in AssetKind::ALL.iter().enumerate() {
             let mean = sums[i] as f64 / n as f64;
             let want = kind.table_iii_mean();
-            assert!((mean - want).abs() <= 0.1 * want + 0.01, "{}: {mean} vs {want}", kind.name());
+            assert!(
+                (mean - want).abs() <= 0.1 * want + 0.01,
+                "{}: {mean} vs {want}",
+                kind.name()
+            );
         }
-        assert!(seen_vents.contains(&5) && seen_vents.contains(&7), "{seen_vents:?}");
+        assert!(
+            seen_vents.contains(&5) && seen_vents.contains(&7),
+            "{seen_vents:?}"
+        );
     }
 
     #[test]

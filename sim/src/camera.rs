@@ -33,7 +33,11 @@ impl Intrinsics {
             return Err(SimError::invalid("height", height, "must be in 16..=8192"));
         }
         if !(10.0..=150.0).contains(&hfov_deg) {
-            return Err(SimError::invalid("hfov_deg", hfov_deg, "must be in 10..=150"));
+            return Err(SimError::invalid(
+                "hfov_deg",
+                hfov_deg,
+                "must be in 10..=150",
+            ));
         }
         let f = f64::from(width) / 2.0 / (hfov_deg.to_radians() / 2.0).tan();
         Ok(Self {
@@ -60,7 +64,11 @@ pub struct CameraConfig {
 
 impl Default for CameraConfig {
     fn default() -> Self {
-        Self { hfov_deg: 70.0, noise: 0.025, shadows: true }
+        Self {
+            hfov_deg: 70.0,
+            noise: 0.025,
+            shadows: true,
+        }
     }
 }
 
@@ -127,7 +135,12 @@ pub fn render(
             }
         }
     }
-    Rendered { width: w, height: h, rgb, labels }
+    Rendered {
+        width: w,
+        height: h,
+        rgb,
+        labels,
+    }
 }
 
 /// The class seen along `ray`, without shading.
@@ -163,7 +176,11 @@ pub fn albedo_at(world: &World, ray: &Ray, hit: &Hit) -> [f32; 3] {
         (p.x, p.z)
     };
     let top = n.z > 0.7;
-    let m = if top { prim.material } else { prim.side_material };
+    let m = if top {
+        prim.material
+    } else {
+        prim.side_material
+    };
     let k = texture(m.texture, u, v, m.salt, n.z.abs() > 0.7);
     [m.albedo[0] * k[0], m.albedo[1] * k[1], m.albedo[2] * k[2]]
 }
@@ -181,7 +198,10 @@ fn sky(d: V3, sun: V3) -> [f32; 3] {
 fn shade_ray(world: &World, ray: &Ray, shadows: bool) -> ([f32; 3], u8) {
     let Some(hit) = world.bvh.intersect(ray, f32::INFINITY) else {
         let s = sky(ray.d, world.sun_dir);
-        return ([s[0] * s[0], s[1] * s[1], s[2] * s[2]], SemanticClass::Sky as u8);
+        return (
+            [s[0] * s[0], s[1] * s[1], s[2] * s[2]],
+            SemanticClass::Sky as u8,
+        );
     };
     let label = class_of_hit(world, &hit);
     let albedo = albedo_at(world, ray, &hit);
@@ -260,7 +280,11 @@ fn texture(t: Texture, u: f32, v: f32, salt: u32, top: bool) -> [f32; 3] {
         }
         Texture::Glass => {
             let mullion = frac(u / 0.7) < 0.08 || frac(v / 0.7) < 0.08;
-            if mullion { g(1.8) } else { g(0.8 + 0.4 * value_noise(u * 0.6, v * 0.6, salt)) }
+            if mullion {
+                g(1.8)
+            } else {
+                g(0.8 + 0.4 * value_noise(u * 0.6, v * 0.6, salt))
+            }
         }
         Texture::Wood => {
             let plank = hash3((u / 0.16).floor() as i32, 0, 4, salt);
@@ -302,7 +326,11 @@ fn ground_albedo(world: &World, x: f32, y: f32) -> [f32; 3] {
         return [0.16 * k, 0.16 * k, 0.17 * k];
     }
     if inside < 0.0 {
-        let tile = if frac(x / 1.5) < 0.05 || frac(y / 1.5) < 0.05 { 0.8 } else { 1.0 };
+        let tile = if frac(x / 1.5) < 0.05 || frac(y / 1.5) < 0.05 {
+            0.8
+        } else {
+            1.0
+        };
         let k = tile * (0.9 + 0.15 * value_noise(x, y, salt));
         return [0.52 * k, 0.51 * k, 0.49 * k];
     }

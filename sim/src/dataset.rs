@@ -67,7 +67,11 @@ impl std::str::FromStr for Split {
         match s {
             "train" => Ok(Split::Train),
             "test" => Ok(Split::Test),
-            other => Err(SimError::invalid("split", other, "must be `train` or `test`")),
+            other => Err(SimError::invalid(
+                "split",
+                other,
+                "must be `train` or `test`",
+            )),
         }
     }
 }
@@ -115,7 +119,8 @@ pub struct DatasetSummary {
 
 /// The seed of world `index` of a split.
 pub fn world_seed(seed: u64, split: Split, index: u32) -> u64 {
-    let mut z = seed ^ split.stream() ^ (u64::from(index) << 20).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    let mut z =
+        seed ^ split.stream() ^ (u64::from(index) << 20).wrapping_mul(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
     z ^ (z >> 31)
@@ -137,7 +142,11 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
     config.view.validate()?;
     let intr = Intrinsics::from_hfov(config.width, config.height, config.camera.hfov_deg)?;
     if config.images_per_world == 0 {
-        return Err(SimError::invalid("images_per_world", 0, "must be at least 1"));
+        return Err(SimError::invalid(
+            "images_per_world",
+            0,
+            "must be at least 1",
+        ));
     }
     for sub in ["images", "labels"] {
         let p = dir.join(sub);
@@ -168,7 +177,15 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
             .collect();
         handles
             .into_iter()
-            .map(|h| h.join().unwrap_or_else(|_| Err(SimError::invalid("jobs", "worker", "a worker thread panicked"))))
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    Err(SimError::invalid(
+                        "jobs",
+                        "worker",
+                        "a worker thread panicked",
+                    ))
+                })
+            })
             .collect()
     });
     let mut rows = Vec::new();
@@ -204,7 +221,10 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
         ));
     }
     write_file(&dir.join("manifest.csv"), csv.as_bytes())?;
-    let names: Vec<String> = SemanticClass::ALL.iter().map(|c| format!("\"{}\"", c.name())).collect();
+    let names: Vec<String> = SemanticClass::ALL
+        .iter()
+        .map(|c| format!("\"{}\"", c.name()))
+        .collect();
     let counts: Vec<String> = totals.iter().map(u64::to_string).collect();
     let json = format!(
         "{{\n  \"split\": \"{}\",\n  \"seed\": {},\n  \"images\": {},\n  \"width\": {},\n  \"height\": {},\n  \"fx\": {:.6},\n  \"fy\": {:.6},\n  \"cx\": {:.6},\n  \"cy\": {:.6},\n  \"asset_distribution\": \"{}\",\n  \"classes\": [{}],\n  \"class_pixel_counts\": [{}],\n  \"files\": \"manifest.csv\"\n}}\n",
@@ -225,26 +245,53 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
         counts.join(", "),
     );
     write_file(&dir.join("manifest.json"), json.as_bytes())?;
-    Ok(DatasetSummary { dir: dir.to_path_buf(), images: rows.len() as u32, class_pixel_counts: totals })
+    Ok(DatasetSummary {
+        dir: dir.to_path_buf(),
+        images: rows.len() as u32,
+        class_pixel_counts: totals,
+    })
 }
 
-fn world_images(config: &DatasetConfig, intr: &Intrinsics, dir: &Path, wi: u32) -> Result<Vec<Row>, SimError> {
+fn world_images(
+    config: &DatasetConfig,
+    intr: &Intrinsics,
+    dir: &Path,
+    wi: u32,
+) -> Result<Vec<Row>, SimError> {
     let ws = world_seed(config.seed, config.split, wi);
-    let world = World::generate(ws, &WorldConfig { assets: config.split.assets(), ..Default::default() })?;
+    let world = World::generate(
+        ws,
+        &WorldConfig {
+            assets: config.split.assets(),
+            ..Default::default()
+        },
+    )?;
     let mut rng = SmallRng::seed_from_u64(ws ^ 0x7669_6577);
     let first = wi * config.images_per_world;
     let last = (first + config.images_per_world).min(config.images);
     let mut rows = Vec::new();
     for index in first..last {
         let view = random_view(&world, &config.view, &mut rng);
-        let img = render(&world, intr, &view.camera, &config.camera, ws.wrapping_add(u64::from(index)));
+        let img = render(
+            &world,
+            intr,
+            &view.camera,
+            &config.camera,
+            ws.wrapping_add(u64::from(index)),
+        );
         let mut counts = [0u64; SemanticClass::COUNT];
         for &l in &img.labels {
             counts[usize::from(l).min(SemanticClass::COUNT - 1)] += 1;
         }
         let roof = counts[SemanticClass::BuildingRooftop as usize] as f64 / img.labels.len() as f64;
-        write_file(&dir.join(format!("images/{index:06}.png")), &encode_rgb_png(&img)?)?;
-        write_file(&dir.join(format!("labels/{index:06}.png")), &encode_label_png(&img)?)?;
+        write_file(
+            &dir.join(format!("images/{index:06}.png")),
+            &encode_rgb_png(&img)?,
+        )?;
+        write_file(
+            &dir.join(format!("labels/{index:06}.png")),
+            &encode_label_png(&img)?,
+        )?;
         rows.push(Row {
             index,
             world_seed: ws,
@@ -264,7 +311,12 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<(), SimError> {
     f.write_all(bytes).map_err(|e| SimError::io(path, e))
 }
 
-fn encode_png(data: &[u8], width: u32, height: u32, color: image::ExtendedColorType) -> Result<Vec<u8>, SimError> {
+fn encode_png(
+    data: &[u8],
+    width: u32,
+    height: u32,
+    color: image::ExtendedColorType,
+) -> Result<Vec<u8>, SimError> {
     use image::ImageEncoder;
     use image::codecs::png::{CompressionType, FilterType, PngEncoder};
     let mut out = Vec::new();
@@ -276,12 +328,22 @@ fn encode_png(data: &[u8], width: u32, height: u32, color: image::ExtendedColorT
 
 /// The RGB image as PNG bytes.
 pub fn encode_rgb_png(img: &Rendered) -> Result<Vec<u8>, SimError> {
-    encode_png(&img.rgb, img.width, img.height, image::ExtendedColorType::Rgb8)
+    encode_png(
+        &img.rgb,
+        img.width,
+        img.height,
+        image::ExtendedColorType::Rgb8,
+    )
 }
 
 /// The label image as 8-bit grayscale PNG bytes (value = class id).
 pub fn encode_label_png(img: &Rendered) -> Result<Vec<u8>, SimError> {
-    encode_png(&img.labels, img.width, img.height, image::ExtendedColorType::L8)
+    encode_png(
+        &img.labels,
+        img.width,
+        img.height,
+        image::ExtendedColorType::L8,
+    )
 }
 
 /// A colour per class for previews.

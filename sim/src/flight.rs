@@ -21,7 +21,11 @@ pub struct ViewConfig {
 
 impl Default for ViewConfig {
     fn default() -> Self {
-        Self { altitude_range_m: (10.0, 40.0), pitch_range_deg: (50.0, 90.0), target_jitter: 0.5 }
+        Self {
+            altitude_range_m: (10.0, 40.0),
+            pitch_range_deg: (50.0, 90.0),
+            target_jitter: 0.5,
+        }
     }
 }
 
@@ -29,14 +33,26 @@ impl ViewConfig {
     pub fn validate(&self) -> Result<(), SimError> {
         let (a, b) = self.altitude_range_m;
         if !(a >= 1.0 && b >= a && b <= 1000.0) {
-            return Err(SimError::invalid("altitude_range_m", format!("{a}..{b}"), "need 1 <= min <= max <= 1000"));
+            return Err(SimError::invalid(
+                "altitude_range_m",
+                format!("{a}..{b}"),
+                "need 1 <= min <= max <= 1000",
+            ));
         }
         let (p, q) = self.pitch_range_deg;
         if !(p >= 10.0 && q >= p && q <= 90.0) {
-            return Err(SimError::invalid("pitch_range_deg", format!("{p}..{q}"), "need 10 <= min <= max <= 90"));
+            return Err(SimError::invalid(
+                "pitch_range_deg",
+                format!("{p}..{q}"),
+                "need 10 <= min <= max <= 90",
+            ));
         }
         if !(0.0..=1.0).contains(&self.target_jitter) {
-            return Err(SimError::invalid("target_jitter", self.target_jitter, "must be in 0..=1"));
+            return Err(SimError::invalid(
+                "target_jitter",
+                self.target_jitter,
+                "must be in 0..=1",
+            ));
         }
         Ok(())
     }
@@ -64,7 +80,10 @@ pub fn camera_pose(position: [f64; 3], yaw: f64, pitch_down: f64) -> Isometry3<f
     let down = forward.cross(&right);
     let m = Matrix3::from_columns(&[right, down, forward]);
     let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m));
-    Isometry3::from_parts(Translation3::new(position[0], position[1], position[2]), rot)
+    Isometry3::from_parts(
+        Translation3::new(position[0], position[1], position[2]),
+        rot,
+    )
 }
 
 /// T_camera_lidar: LiDAR frame x forward, y left, z up, 5 cm above the camera.
@@ -97,13 +116,25 @@ pub fn view_of<R: Rng + ?Sized>(
     let tx = c[0] + rng.random_range(-1.0..=1.0) * j * s[0] / 2.0;
     let ty = c[1] + rng.random_range(-1.0..=1.0) * j * s[1] / 2.0;
     let (a0, a1) = config.altitude_range_m;
-    let altitude = if a1 > a0 { rng.random_range(a0..a1) } else { a0 };
+    let altitude = if a1 > a0 {
+        rng.random_range(a0..a1)
+    } else {
+        a0
+    };
     let (p0, p1) = config.pitch_range_deg;
-    let pitch_deg = if p1 > p0 { rng.random_range(p0..p1) } else { p0 };
+    let pitch_deg = if p1 > p0 {
+        rng.random_range(p0..p1)
+    } else {
+        p0
+    };
     let yaw = rng.random_range(0.0..std::f64::consts::TAU);
     let pitch = pitch_deg.to_radians();
     let back = altitude / pitch.tan().max(1e-9);
-    let position = [tx - back * yaw.cos(), ty - back * yaw.sin(), b.height_m + altitude];
+    let position = [
+        tx - back * yaw.cos(),
+        ty - back * yaw.sin(),
+        b.height_m + altitude,
+    ];
     View {
         building,
         camera: camera_pose(position, yaw, pitch),
@@ -135,7 +166,12 @@ pub struct FlightConfig {
 
 impl Default for FlightConfig {
     fn default() -> Self {
-        Self { frames: 20, rate_hz: 10.0, altitude_m: (40.0, 10.0), pitch_deg: (50.0, 85.0) }
+        Self {
+            frames: 20,
+            rate_hz: 10.0,
+            altitude_m: (40.0, 10.0),
+            pitch_deg: (50.0, 85.0),
+        }
     }
 }
 
@@ -157,12 +193,20 @@ pub fn approach<R: Rng + ?Sized>(
     let n = config.frames.max(1);
     (0..n)
         .map(|i| {
-            let f = if n > 1 { f64::from(i) / f64::from(n - 1) } else { 0.0 };
+            let f = if n > 1 {
+                f64::from(i) / f64::from(n - 1)
+            } else {
+                0.0
+            };
             let altitude = config.altitude_m.0 + (config.altitude_m.1 - config.altitude_m.0) * f;
             let pitch_deg = config.pitch_deg.0 + (config.pitch_deg.1 - config.pitch_deg.0) * f;
             let pitch = pitch_deg.to_radians();
             let back = altitude / pitch.tan().max(1e-9);
-            let position = [aim[0] - back * yaw.cos(), aim[1] - back * yaw.sin(), b.height_m + altitude];
+            let position = [
+                aim[0] - back * yaw.cos(),
+                aim[1] - back * yaw.sin(),
+                b.height_m + altitude,
+            ];
             View {
                 building,
                 camera: camera_pose(position, yaw, pitch),

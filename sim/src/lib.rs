@@ -48,10 +48,17 @@ pub use world::{Asset, Building, World, WorldConfig};
 pub enum SimError {
     /// A configuration value is out of range.
     #[error("`{field}` = {value} is invalid: {reason}")]
-    InvalidConfig { field: &'static str, value: String, reason: &'static str },
+    InvalidConfig {
+        field: &'static str,
+        value: String,
+        reason: &'static str,
+    },
     /// Reading or writing a file failed.
     #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     /// Encoding or decoding an image failed.
     #[error("image codec: {0}")]
     Image(String),
@@ -67,11 +74,22 @@ pub enum SimError {
 }
 
 impl SimError {
-    pub(crate) fn invalid(field: &'static str, value: impl std::fmt::Display, reason: &'static str) -> Self {
-        SimError::InvalidConfig { field, value: value.to_string(), reason }
+    pub(crate) fn invalid(
+        field: &'static str,
+        value: impl std::fmt::Display,
+        reason: &'static str,
+    ) -> Self {
+        SimError::InvalidConfig {
+            field,
+            value: value.to_string(),
+            reason,
+        }
     }
 
     pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
-        SimError::Io { path: path.display().to_string(), source }
+        SimError::Io {
+            path: path.display().to_string(),
+            source,
+        }
     }
 }

@@ -52,25 +52,53 @@ impl LidarConfig {
             return Err(SimError::invalid("beams", self.beams, "must be in 2..=256"));
         }
         if !(1.0..=180.0).contains(&self.vertical_fov_deg) {
-            return Err(SimError::invalid("vertical_fov_deg", self.vertical_fov_deg, "must be in 1..=180"));
+            return Err(SimError::invalid(
+                "vertical_fov_deg",
+                self.vertical_fov_deg,
+                "must be in 1..=180",
+            ));
         }
         if !(1.0..=360.0).contains(&self.horizontal_fov_deg) {
-            return Err(SimError::invalid("horizontal_fov_deg", self.horizontal_fov_deg, "must be in 1..=360"));
+            return Err(SimError::invalid(
+                "horizontal_fov_deg",
+                self.horizontal_fov_deg,
+                "must be in 1..=360",
+            ));
         }
         if !(self.rate_hz > 0.0 && self.rate_hz <= 100.0) {
-            return Err(SimError::invalid("rate_hz", self.rate_hz, "must be in (0, 100]"));
+            return Err(SimError::invalid(
+                "rate_hz",
+                self.rate_hz,
+                "must be in (0, 100]",
+            ));
         }
         if !(self.points_per_second >= 100.0 && self.points_per_second <= 1e8) {
-            return Err(SimError::invalid("points_per_second", self.points_per_second, "must be in 100..=1e8"));
+            return Err(SimError::invalid(
+                "points_per_second",
+                self.points_per_second,
+                "must be in 100..=1e8",
+            ));
         }
         if !(self.max_range_m > 0.0 && self.max_range_m <= 1e4) {
-            return Err(SimError::invalid("max_range_m", self.max_range_m, "must be in (0, 1e4]"));
+            return Err(SimError::invalid(
+                "max_range_m",
+                self.max_range_m,
+                "must be in (0, 1e4]",
+            ));
         }
         if !(0.0..=1.0).contains(&self.range_noise_m) {
-            return Err(SimError::invalid("range_noise_m", self.range_noise_m, "must be in 0..=1"));
+            return Err(SimError::invalid(
+                "range_noise_m",
+                self.range_noise_m,
+                "must be in 0..=1",
+            ));
         }
         if !(0.0..1.0).contains(&self.dropout) {
-            return Err(SimError::invalid("dropout", self.dropout, "must be in [0, 1)"));
+            return Err(SimError::invalid(
+                "dropout",
+                self.dropout,
+                "must be in [0, 1)",
+            ));
         }
         Ok(())
     }
@@ -100,10 +128,21 @@ pub struct LidarPoint {
 }
 
 /// Scans from `pose` (T_world_lidar). `seed` drives noise and dropout.
-pub fn scan(world: &World, pose: &Isometry3<f64>, config: &LidarConfig, seed: u64) -> Result<Vec<LidarPoint>, SimError> {
+pub fn scan(
+    world: &World,
+    pose: &Isometry3<f64>,
+    config: &LidarConfig,
+    seed: u64,
+) -> Result<Vec<LidarPoint>, SimError> {
     config.validate()?;
     let mut rng = SmallRng::seed_from_u64(seed ^ 0x6c69_6461_7200_0000);
-    let noise = Normal::new(0.0, config.range_noise_m).map_err(|_| SimError::invalid("range_noise_m", config.range_noise_m, "must be finite and >= 0"))?;
+    let noise = Normal::new(0.0, config.range_noise_m).map_err(|_| {
+        SimError::invalid(
+            "range_noise_m",
+            config.range_noise_m,
+            "must be finite and >= 0",
+        )
+    })?;
     let cols = config.columns();
     let t = pose.translation.vector;
     let origin = V3::new(t.x as f32, t.y as f32, t.z as f32);
@@ -116,7 +155,8 @@ pub fn scan(world: &World, pose: &Isometry3<f64>, config: &LidarConfig, seed: u6
             let az = (config.horizontal_fov_deg / 2.0
                 - config.horizontal_fov_deg * f64::from(c) / f64::from(cols - 1))
             .to_radians();
-            let local_dir = nalgebra::Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
+            let local_dir =
+                nalgebra::Vector3::new(el.cos() * az.cos(), el.cos() * az.sin(), el.sin());
             let wd = pose.rotation * local_dir;
             let ray = Ray::new(origin, V3::new(wd.x as f32, wd.y as f32, wd.z as f32));
             let n: f64 = noise.sample(&mut rng);
@@ -132,7 +172,8 @@ pub fn scan(world: &World, pose: &Isometry3<f64>, config: &LidarConfig, seed: u6
             let wp = pose * Point3::from(lp);
             let albedo = albedo_at(world, &ray, &hit);
             let cos_inc = hit.normal.dot(-ray.d).abs();
-            let intensity = ((albedo[0] + albedo[1] + albedo[2]) / 3.0 * (0.3 + 0.7 * cos_inc)).clamp(0.0, 1.0);
+            let intensity =
+                ((albedo[0] + albedo[1] + albedo[2]) / 3.0 * (0.3 + 0.7 * cos_inc)).clamp(0.0, 1.0);
             let (building, asset) = if hit.prim == NO_PRIM {
                 (u32::MAX, u32::MAX)
             } else {

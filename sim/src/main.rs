@@ -9,12 +9,18 @@ use landing_sim::camera::{CameraConfig, Intrinsics, render};
 use landing_sim::dataset::{DatasetConfig, Split, class_color, write_dataset};
 use landing_sim::flight::{FlightConfig, ViewConfig, lidar_pose, random_view, view_of};
 use landing_sim::lidar::{LidarConfig, scan};
-use landing_sim::recording::{RecordConfig, busiest_roof, write_ply as write_recording_ply, write_recording};
+use landing_sim::recording::{
+    RecordConfig, busiest_roof, write_ply as write_recording_ply, write_recording,
+};
 use landing_sim::{AssetDistribution, World, WorldConfig};
 use rand::SeedableRng;
 
 #[derive(Parser)]
-#[command(name = "landing-sim", version, about = "Procedural rooftop city simulator")]
+#[command(
+    name = "landing-sim",
+    version,
+    about = "Procedural rooftop city simulator"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -128,7 +134,17 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
-        Command::Dataset { seed, images, split, out, width, height, hfov, images_per_world, jobs } => {
+        Command::Dataset {
+            seed,
+            images,
+            split,
+            out,
+            width,
+            height,
+            hfov,
+            images_per_world,
+            jobs,
+        } => {
             let split: Split = split.parse()?;
             let config = DatasetConfig {
                 seed,
@@ -136,13 +152,17 @@ fn main() -> anyhow::Result<()> {
                 split,
                 width,
                 height,
-                camera: CameraConfig { hfov_deg: hfov, ..Default::default() },
+                camera: CameraConfig {
+                    hfov_deg: hfov,
+                    ..Default::default()
+                },
                 images_per_world,
                 jobs,
                 ..Default::default()
             };
             let start = Instant::now();
-            let summary = write_dataset(&config, &out).with_context(|| format!("writing dataset to {}", out.display()))?;
+            let summary = write_dataset(&config, &out)
+                .with_context(|| format!("writing dataset to {}", out.display()))?;
             let total: u64 = summary.class_pixel_counts.iter().sum();
             let roof = summary.class_pixel_counts[4] as f64 / total.max(1) as f64;
             println!(
@@ -169,17 +189,28 @@ fn main() -> anyhow::Result<()> {
         } => {
             let config = RecordConfig {
                 seed,
-                world: WorldConfig { assets: assets.distribution(), ..Default::default() },
-                flight: FlightConfig { frames, altitude_m: (start_altitude, end_altitude), ..Default::default() },
+                world: WorldConfig {
+                    assets: assets.distribution(),
+                    ..Default::default()
+                },
+                flight: FlightConfig {
+                    frames,
+                    altitude_m: (start_altitude, end_altitude),
+                    ..Default::default()
+                },
                 width,
                 height,
-                camera: CameraConfig { hfov_deg: hfov, ..Default::default() },
+                camera: CameraConfig {
+                    hfov_deg: hfov,
+                    ..Default::default()
+                },
                 building,
                 drone_id,
                 ..Default::default()
             };
             let start = Instant::now();
-            let n = write_recording(&config, &out).with_context(|| format!("writing {}", out.display()))?;
+            let n = write_recording(&config, &out)
+                .with_context(|| format!("writing {}", out.display()))?;
             let size = std::fs::metadata(&out).map(|m| m.len()).unwrap_or(0);
             println!(
                 "wrote {n} frames to {} ({:.2} MB) in {:.1} s",
@@ -188,14 +219,32 @@ fn main() -> anyhow::Result<()> {
                 start.elapsed().as_secs_f64()
             );
         }
-        Command::Ply { seed, out, altitude, building } => {
+        Command::Ply {
+            seed,
+            out,
+            altitude,
+            building,
+        } => {
             let world = World::generate(seed, &WorldConfig::default())?;
             let b = building.unwrap_or_else(|| busiest_roof(&world));
-            anyhow::ensure!(b < world.buildings.len(), "--building {b}: the world has {} buildings", world.buildings.len());
-            let view = ViewConfig { altitude_range_m: (altitude, altitude), pitch_range_deg: (70.0, 70.0), target_jitter: 0.0 };
+            anyhow::ensure!(
+                b < world.buildings.len(),
+                "--building {b}: the world has {} buildings",
+                world.buildings.len()
+            );
+            let view = ViewConfig {
+                altitude_range_m: (altitude, altitude),
+                pitch_range_deg: (70.0, 70.0),
+                target_jitter: 0.0,
+            };
             let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
             let v = view_of(&world, b, &view, &mut rng);
-            let points = scan(&world, &lidar_pose(&v.camera), &LidarConfig::default(), seed)?;
+            let points = scan(
+                &world,
+                &lidar_pose(&v.camera),
+                &LidarConfig::default(),
+                seed,
+            )?;
             write_recording_ply(&points, &out)?;
             let roof = points.iter().filter(|p| p.building as usize == b).count();
             println!(
@@ -205,8 +254,21 @@ fn main() -> anyhow::Result<()> {
                 out.display()
             );
         }
-        Command::Preview { seed, out, width, height, hfov, assets } => {
-            let world = World::generate(seed, &WorldConfig { assets: assets.distribution(), ..Default::default() })?;
+        Command::Preview {
+            seed,
+            out,
+            width,
+            height,
+            hfov,
+            assets,
+        } => {
+            let world = World::generate(
+                seed,
+                &WorldConfig {
+                    assets: assets.distribution(),
+                    ..Default::default()
+                },
+            )?;
             let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
             let view = random_view(&world, &ViewConfig::default(), &mut rng);
             let intr = Intrinsics::from_hfov(width, height, hfov)?;
@@ -217,11 +279,17 @@ fn main() -> anyhow::Result<()> {
             for y in 0..height {
                 for x in 0..width {
                     let i = ((y * width + x) * 3) as usize;
-                    canvas.put_pixel(x, y, image::Rgb([img.rgb[i], img.rgb[i + 1], img.rgb[i + 2]]));
+                    canvas.put_pixel(
+                        x,
+                        y,
+                        image::Rgb([img.rgb[i], img.rgb[i + 1], img.rgb[i + 2]]),
+                    );
                     canvas.put_pixel(width + x, y, image::Rgb(class_color(img.label(x, y))));
                 }
             }
-            canvas.save(&out).with_context(|| format!("writing {}", out.display()))?;
+            canvas
+                .save(&out)
+                .with_context(|| format!("writing {}", out.display()))?;
             println!(
                 "wrote {} (building {}, {:.1} m above the roof, pitch {:.1}°, rendered in {ms:.1} ms)",
                 out.display(),

@@ -115,5 +115,6 @@ pub fn value_noise(x: f32, y: f32, salt: u32) -> f32 {
 
 /// Two octaves of value noise, in `[0, 1)`.
 pub fn fbm2(x: f32, y: f32, salt: u32) -> f32 {
-    0.65 * value_noise(x, y, salt) + 0.35 * value_noise(x * 2.7 + 13.1, y * 2.7 - 7.3, salt ^ 0x5bd1)
+    0.65 * value_noise(x, y, salt)
+        + 0.35 * value_noise(x * 2.7 + 13.1, y * 2.7 - 7.3, salt ^ 0x5bd1)
 }

@@ -95,11 +95,19 @@ pub fn busiest_roof(world: &World) -> usize {
 pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimError> {
     let world = World::generate(config.seed, &config.world)?;
     if world.buildings.is_empty() {
-        return Err(SimError::invalid("world", "no buildings", "the city has no building to approach"));
+        return Err(SimError::invalid(
+            "world",
+            "no buildings",
+            "the city has no building to approach",
+        ));
     }
     let building = config.building.unwrap_or_else(|| busiest_roof(&world));
     if building >= world.buildings.len() {
-        return Err(SimError::invalid("building", building, "is not a building of this world"));
+        return Err(SimError::invalid(
+            "building",
+            building,
+            "is not a building of this world",
+        ));
     }
     let intrinsics = Intrinsics::from_hfov(config.width, config.height, config.camera.hfov_deg)?;
     let mut rng = SmallRng::seed_from_u64(config.seed ^ 0x666c_6967_6874);
@@ -108,10 +116,24 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
     for (i, view) in views.into_iter().enumerate() {
         let frame_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(i as u64);
         let lp = lidar_pose(&view.camera);
-        let image = render(&world, &intrinsics, &view.camera, &config.camera, frame_seed);
+        let image = render(
+            &world,
+            &intrinsics,
+            &view.camera,
+            &config.camera,
+            frame_seed,
+        );
         let points = scan(&world, &lp, &config.lidar, frame_seed)?;
         let roofs = ground_truth(&world, &points, building, &config.truth)?;
-        frames.push(SimFrame { sequence: i as u64, view, lidar_pose: lp, intrinsics, image, points, roofs });
+        frames.push(SimFrame {
+            sequence: i as u64,
+            view,
+            lidar_pose: lp,
+            intrinsics,
+            image,
+            points,
+            roofs,
+        });
     }
     Ok((world, frames))
 }
@@ -121,27 +143,56 @@ pub fn pose_to_proto(p: &Isometry3<f64>) -> v1::Pose {
     let t = p.translation.vector;
     let q = p.rotation.quaternion();
     v1::Pose {
-        position: Some(v1::Vector3 { x: t.x, y: t.y, z: t.z }),
-        orientation: Some(v1::Quaternion { x: q.i, y: q.j, z: q.k, w: q.w }),
+        position: Some(v1::Vector3 {
+            x: t.x,
+            y: t.y,
+            z: t.z,
+        }),
+        orientation: Some(v1::Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        }),
     }
 }
 
 /// Isometry of a protobuf pose (identity when unset; the quaternion is normalised).
 pub fn pose_from_proto(p: Option<&v1::Pose>) -> Isometry3<f64> {
-    let Some(p) = p else { return Isometry3::identity() };
+    let Some(p) = p else {
+        return Isometry3::identity();
+    };
     let t = p.position.clone().unwrap_or_default();
-    let q = p.orientation.clone().unwrap_or(v1::Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 });
-    let uq = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
+    let q = p.orientation.clone().unwrap_or(v1::Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        w: 1.0,
+    });
+    let uq =
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z));
     Isometry3::from_parts(nalgebra::Translation3::new(t.x, t.y, t.z), uq)
 }
 
 fn timestamp(sequence: u64, rate_hz: f64) -> prost_types::Timestamp {
     let ns = (sequence as f64 / rate_hz * 1e9).round() as i64;
-    prost_types::Timestamp { seconds: START_UNIX_S + ns / 1_000_000_000, nanos: (ns % 1_000_000_000) as i32 }
+    prost_types::Timestamp {
+        seconds: START_UNIX_S + ns / 1_000_000_000,
+        nanos: (ns % 1_000_000_000) as i32,
+    }
 }
 
 fn ring(points: &[[f64; 2]], z: f64) -> v1::LinearRing {
-    v1::LinearRing { points: points.iter().map(|p| v1::Vector3 { x: p[0], y: p[1], z }).collect() }
+    v1::LinearRing {
+        points: points
+            .iter()
+            .map(|p| v1::Vector3 {
+                x: p[0],
+                y: p[1],
+                z,
+            })
+            .collect(),
+    }
 }
 
 /// Packs points (LiDAR frame) as x, y, z, intensity FLOAT32 + class UINT8, stride 17.
@@ -172,7 +223,14 @@ fn fields() -> Vec<v1::PackedElementField> {
 }
 
 fn calibration(i: &Intrinsics) -> v1::CameraCalibration {
-    v1::CameraCalibration { width: i.width, height: i.height, fx: i.fx, fy: i.fy, cx: i.cx, cy: i.cy }
+    v1::CameraCalibration {
+        width: i.width,
+        height: i.height,
+        fx: i.fx,
+        fy: i.fy,
+        cx: i.cx,
+        cy: i.cy,
+    }
 }
 
 /// The three messages of a frame: Frame, GroundTruth and the label image.
@@ -239,10 +297,19 @@ pub fn frame_messages(
                 .collect(),
             landable_region: Some(v1::Polygon {
                 shell: Some(ring(&r.landable_region.shell, r.height_m)),
-                holes: r.landable_region.holes.iter().map(|h| ring(h, r.height_m)).collect(),
+                holes: r
+                    .landable_region
+                    .holes
+                    .iter()
+                    .map(|h| ring(h, r.height_m))
+                    .collect(),
                 plane_height_m: r.height_m,
             }),
-            best_landing_point: Some(v1::Vector3 { x: r.best_point[0], y: r.best_point[1], z: r.height_m }),
+            best_landing_point: Some(v1::Vector3 {
+                x: r.best_point[0],
+                y: r.best_point[1],
+                z: r.height_m,
+            }),
             best_safe_radius_m: r.best_radius_m,
             lidar_point_count: r.lidar_points as u32,
         })
@@ -272,7 +339,11 @@ pub fn write_recording(config: &RecordConfig, path: &Path) -> Result<usize, SimE
 }
 
 /// Encodes simulated frames as MCAP bytes.
-pub fn encode_recording(world: &World, frames: &[SimFrame], config: &RecordConfig) -> Result<Vec<u8>, SimError> {
+pub fn encode_recording(
+    world: &World,
+    frames: &[SimFrame],
+    config: &RecordConfig,
+) -> Result<Vec<u8>, SimError> {
     let opts = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .profile("")
@@ -280,17 +351,33 @@ pub fn encode_recording(world: &World, frames: &[SimFrame], config: &RecordConfi
     let mut w = opts.create(Cursor::new(Vec::new())).map_err(mcap_err)?;
     let fds = landing_proto::FILE_DESCRIPTOR_SET;
     let meta = BTreeMap::new();
-    let frame_schema = w.add_schema("landing.v1.Frame", "protobuf", fds).map_err(mcap_err)?;
-    let truth_schema = w.add_schema("landing.v1.GroundTruth", "protobuf", fds).map_err(mcap_err)?;
-    let image_schema = w.add_schema("landing.v1.CameraImage", "protobuf", fds).map_err(mcap_err)?;
-    let frame_ch = w.add_channel(frame_schema, FRAME_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
-    let truth_ch = w.add_channel(truth_schema, TRUTH_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
-    let label_ch = w.add_channel(image_schema, LABELS_TOPIC, "protobuf", &meta).map_err(mcap_err)?;
+    let frame_schema = w
+        .add_schema("landing.v1.Frame", "protobuf", fds)
+        .map_err(mcap_err)?;
+    let truth_schema = w
+        .add_schema("landing.v1.GroundTruth", "protobuf", fds)
+        .map_err(mcap_err)?;
+    let image_schema = w
+        .add_schema("landing.v1.CameraImage", "protobuf", fds)
+        .map_err(mcap_err)?;
+    let frame_ch = w
+        .add_channel(frame_schema, FRAME_TOPIC, "protobuf", &meta)
+        .map_err(mcap_err)?;
+    let truth_ch = w
+        .add_channel(truth_schema, TRUTH_TOPIC, "protobuf", &meta)
+        .map_err(mcap_err)?;
+    let label_ch = w
+        .add_channel(image_schema, LABELS_TOPIC, "protobuf", &meta)
+        .map_err(mcap_err)?;
     for f in frames {
         let (frame, truth, labels) = frame_messages(world, f, config)?;
         let ts = frame.timestamp.unwrap_or_default();
         let t = (ts.seconds as u64) * 1_000_000_000 + ts.nanos as u64;
-        for (ch, data) in [(frame_ch, frame.encode_to_vec()), (truth_ch, truth.encode_to_vec()), (label_ch, labels.encode_to_vec())] {
+        for (ch, data) in [
+            (frame_ch, frame.encode_to_vec()),
+            (truth_ch, truth.encode_to_vec()),
+            (label_ch, labels.encode_to_vec()),
+        ] {
             let header = mcap::records::MessageHeader {
                 channel_id: ch,
                 sequence: f.sequence as u32,
@@ -324,7 +411,10 @@ pub fn read_recording_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, SimError
     let mut frames: BTreeMap<u64, v1::Frame> = BTreeMap::new();
     let mut truths: BTreeMap<u64, v1::GroundTruth> = BTreeMap::new();
     let mut labels: BTreeMap<u64, v1::CameraImage> = BTreeMap::new();
-    let dec = |what: &str, e: prost::DecodeError| SimError::Decode { what: what.to_string(), reason: e.to_string() };
+    let dec = |what: &str, e: prost::DecodeError| SimError::Decode {
+        what: what.to_string(),
+        reason: e.to_string(),
+    };
     for msg in mcap::MessageStream::new(bytes).map_err(mcap_err)? {
         let msg = msg.map_err(mcap_err)?;
         match msg.channel.topic.as_str() {
@@ -345,7 +435,11 @@ pub fn read_recording_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, SimError
     }
     Ok(frames
         .into_iter()
-        .map(|(seq, frame)| RecordedFrame { frame, truth: truths.remove(&seq), labels: labels.remove(&seq) })
+        .map(|(seq, frame)| RecordedFrame {
+            frame,
+            truth: truths.remove(&seq),
+            labels: labels.remove(&seq),
+        })
         .collect())
 }
 

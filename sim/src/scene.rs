@@ -18,9 +18,21 @@ pub enum Shape {
     /// `cos`/`sin` are those of the yaw.
     Box { c: V3, h: V3, cos: f32, sin: f32 },
     /// A vertical cylinder with axis at (`cx`, `cy`) from `z0` to `z1`.
-    Cylinder { cx: f32, cy: f32, r: f32, z0: f32, z1: f32 },
+    Cylinder {
+        cx: f32,
+        cy: f32,
+        r: f32,
+        z0: f32,
+        z1: f32,
+    },
     /// A vertical cone: radius `r` at `z0`, apex at `z1`.
-    Cone { cx: f32, cy: f32, r: f32, z0: f32, z1: f32 },
+    Cone {
+        cx: f32,
+        cy: f32,
+        r: f32,
+        z0: f32,
+        z1: f32,
+    },
     /// A sphere.
     Sphere { c: V3, r: f32 },
 }
@@ -85,7 +97,11 @@ pub struct Prim {
 impl Prim {
     /// The class of the surface with outward normal `n`.
     pub fn class_for_normal(&self, n: V3) -> u8 {
-        if n.z > 0.7 { self.top_class } else { self.side_class }
+        if n.z > 0.7 {
+            self.top_class
+        } else {
+            self.side_class
+        }
     }
 
     /// Axis-aligned bounds, padded by 1 mm so that grazing hits at rims are not culled.
@@ -146,7 +162,11 @@ pub fn intersect_shape(shape: &Shape, ray: &Ray, t_max: f32) -> Option<(f32, V3)
             let p = ray.o - c;
             // Into the box frame: rotate by -yaw.
             let o = V3::new(cos * p.x + sin * p.y, -sin * p.x + cos * p.y, p.z);
-            let d = V3::new(cos * ray.d.x + sin * ray.d.y, -sin * ray.d.x + cos * ray.d.y, ray.d.z);
+            let d = V3::new(
+                cos * ray.d.x + sin * ray.d.y,
+                -sin * ray.d.x + cos * ray.d.y,
+                ray.d.z,
+            );
             let mut t0 = f32::NEG_INFINITY;
             let mut t1 = f32::INFINITY;
             let mut axis0 = 0usize;
@@ -217,7 +237,8 @@ pub fn intersect_shape(shape: &Shape, ray: &Ray, t_max: f32) -> Option<(f32, V3)
                         if t > T_EPS && t < t_lim {
                             let z = ray.o.z + t * ray.d.z;
                             if z >= z0 && z <= z1 {
-                                let n = V3::new(px + t * ray.d.x, py + t * ray.d.y, 0.0) * (1.0 / r);
+                                let n =
+                                    V3::new(px + t * ray.d.x, py + t * ray.d.y, 0.0) * (1.0 / r);
                                 best = Some((t, n));
                                 t_lim = t;
                                 break;
@@ -321,7 +342,7 @@ struct Node {
 #[derive(Debug, Clone)]
 pub struct Bvh {
     nodes: Vec<Node>,
-    order: Vec<u32>,
+    /// Primitives in leaf order, so that a leaf's primitives are contiguous.
     prims: Vec<Prim>,
 }
 
@@ -338,7 +359,13 @@ const BINS: usize = 16;
 /// Binned surface-area-heuristic split of `idx`: reorders it and returns the split position, or
 /// `None` when a leaf is cheaper (only for small sets) . Falls back to a median split when all
 /// centroids coincide.
-fn sah_split(idx: &mut [u32], bounds: &[(V3, V3)], centroids: &[V3], clo: V3, chi: V3) -> Option<usize> {
+fn sah_split(
+    idx: &mut [u32],
+    bounds: &[(V3, V3)],
+    centroids: &[V3],
+    clo: V3,
+    chi: V3,
+) -> Option<usize> {
     let n = idx.len();
     let mut best = (f32::INFINITY, 0usize, 0usize);
     let mut node_lo = V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY);
@@ -353,8 +380,12 @@ fn sah_split(idx: &mut [u32], bounds: &[(V3, V3)], centroids: &[V3], clo: V3, ch
             continue;
         }
         let scale = BINS as f32 / (b - a);
-        let bin_of = |i: u32| (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
-        let empty = (V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY), V3::new(f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY));
+        let bin_of =
+            |i: u32| (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
+        let empty = (
+            V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY),
+            V3::new(f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY),
+        );
         let mut bins = [(empty, 0usize); BINS];
         for &i in idx.iter() {
             let k = bin_of(i);
@@ -368,7 +399,11 @@ fn sah_split(idx: &mut [u32], bounds: &[(V3, V3)], centroids: &[V3], clo: V3, ch
         for k in (1..BINS).rev() {
             acc = (acc.0.min(bins[k].0.0), acc.1.max(bins[k].0.1));
             cnt += bins[k].1;
-            right_cost[k] = if cnt > 0 { area(acc.0, acc.1) * cnt as f32 } else { 0.0 };
+            right_cost[k] = if cnt > 0 {
+                area(acc.0, acc.1) * cnt as f32
+            } else {
+                0.0
+            };
         }
         let mut acc = empty;
         let mut cnt = 0usize;
@@ -423,7 +458,7 @@ impl Bvh {
         if prims.is_empty() {
             nodes[0].min = V3::new(1.0, 1.0, 1.0);
             nodes[0].max = V3::new(-1.0, -1.0, -1.0);
-            return Self { nodes, order, prims };
+            return Self { nodes, prims };
         }
         // Explicit stack of (node, start, end) keeps deep trees off the call stack.
         let mut stack = vec![(0usize, 0usize, order.len())];
@@ -454,16 +489,28 @@ impl Bvh {
             };
             let mid = start + mid;
             let left = nodes.len();
-            nodes.push(Node { min: lo, max: hi, first: 0, count: 0 });
-            nodes.push(Node { min: lo, max: hi, first: 0, count: 0 });
+            nodes.push(Node {
+                min: lo,
+                max: hi,
+                first: 0,
+                count: 0,
+            });
+            nodes.push(Node {
+                min: lo,
+                max: hi,
+                first: 0,
+                count: 0,
+            });
             nodes[ni].first = left as u32;
             nodes[ni].count = 0;
             stack.push((left + 1, mid, end));
             stack.push((left, start, mid));
         }
-        Self { nodes, order, prims }
+        let prims = order.iter().map(|&i| prims[i as usize]).collect();
+        Self { nodes, prims }
     }
 
+    /// The primitives, in the tree's order ([`Hit::prim`] indexes this).
     pub fn prims(&self) -> &[Prim] {
         &self.prims
     }
@@ -488,7 +535,11 @@ impl Bvh {
             let t = -ray.o.z / ray.d.z;
             if t > T_EPS && t < t_best {
                 t_best = t;
-                best = Some(Hit { t, normal: V3::new(0.0, 0.0, 1.0), prim: NO_PRIM });
+                best = Some(Hit {
+                    t,
+                    normal: V3::new(0.0, 0.0, 1.0),
+                    prim: NO_PRIM,
+                });
             }
         }
         let mut stack = [0u32; 64];
@@ -502,10 +553,17 @@ impl Bvh {
             let node = &self.nodes[stack[sp] as usize];
             if node.count > 0 {
                 let first = node.first as usize;
-                for &pi in &self.order[first..first + node.count as usize] {
-                    if let Some((t, n)) = intersect_shape(&self.prims[pi as usize].shape, ray, t_best) {
+                for (k, p) in self.prims[first..first + node.count as usize]
+                    .iter()
+                    .enumerate()
+                {
+                    if let Some((t, n)) = intersect_shape(&p.shape, ray, t_best) {
                         t_best = t;
-                        best = Some(Hit { t, normal: n, prim: pi });
+                        best = Some(Hit {
+                            t,
+                            normal: n,
+                            prim: (first + k) as u32,
+                        });
                     }
                 }
                 continue;
@@ -549,8 +607,8 @@ impl Bvh {
             let node = &self.nodes[stack[sp] as usize];
             if node.count > 0 {
                 let first = node.first as usize;
-                for &pi in &self.order[first..first + node.count as usize] {
-                    if intersect_shape(&self.prims[pi as usize].shape, ray, t_max).is_some() {
+                for p in &self.prims[first..first + node.count as usize] {
+                    if intersect_shape(&p.shape, ray, t_max).is_some() {
                         return true;
                     }
                 }
@@ -577,8 +635,16 @@ mod tests {
             shape,
             top_class: 4,
             side_class: 3,
-            material: Material { albedo: [0.5; 3], texture: Texture::Plain, salt: 0 },
-            side_material: Material { albedo: [0.5; 3], texture: Texture::Plain, salt: 0 },
+            material: Material {
+                albedo: [0.5; 3],
+                texture: Texture::Plain,
+                salt: 0,
+            },
+            side_material: Material {
+                albedo: [0.5; 3],
+                texture: Texture::Plain,
+                salt: 0,
+            },
             building: 0,
             asset: NO_PRIM,
         }
@@ -587,7 +653,12 @@ mod tests {
     #[test]
     fn box_turned_45_degrees_is_hit_at_its_corner() {
         let (s, c) = std::f32::consts::FRAC_PI_4.sin_cos();
-        let shape = Shape::Box { c: V3::new(0.0, 0.0, 0.0), h: V3::new(1.0, 1.0, 1.0), cos: c, sin: s };
+        let shape = Shape::Box {
+            c: V3::new(0.0, 0.0, 0.0),
+            h: V3::new(1.0, 1.0, 1.0),
+            cos: c,
+            sin: s,
+        };
         let ray = Ray::new(V3::new(-5.0, 0.0, 0.0), V3::new(1.0, 0.0, 0.0));
         let (t, n) = intersect_shape(&shape, &ray, 100.0).expect("hit");
         assert!((t - (5.0 - 2f32.sqrt())).abs() < 1e-4, "t = {t}");
@@ -598,14 +669,29 @@ mod tests {
     fn cylinder_cone_sphere_hits_from_above() {
         let down = V3::new(0.0, 0.0, -1.0);
         let ray = Ray::new(V3::new(0.2, 0.0, 10.0), down);
-        let cyl = Shape::Cylinder { cx: 0.0, cy: 0.0, r: 1.0, z0: 0.0, z1: 2.0 };
+        let cyl = Shape::Cylinder {
+            cx: 0.0,
+            cy: 0.0,
+            r: 1.0,
+            z0: 0.0,
+            z1: 2.0,
+        };
         assert_eq!(intersect_shape(&cyl, &ray, 100.0).map(|h| h.0), Some(8.0));
-        let cone = Shape::Cone { cx: 0.0, cy: 0.0, r: 1.0, z0: 0.0, z1: 2.0 };
+        let cone = Shape::Cone {
+            cx: 0.0,
+            cy: 0.0,
+            r: 1.0,
+            z0: 0.0,
+            z1: 2.0,
+        };
         let (t, n) = intersect_shape(&cone, &ray, 100.0).expect("cone hit");
         // Radius 0.2 is reached at z = 2 - 0.2 * 2 = 1.6.
         assert!((t - 8.4).abs() < 1e-4, "t = {t}");
         assert!(n.z > 0.0 && n.x > 0.0);
-        let sph = Shape::Sphere { c: V3::new(0.0, 0.0, 0.0), r: 1.0 };
+        let sph = Shape::Sphere {
+            c: V3::new(0.0, 0.0, 0.0),
+            r: 1.0,
+        };
         let (t, _) = intersect_shape(&sph, &ray, 100.0).expect("sphere hit");
         assert!((t - (10.0 - (1.0f32 - 0.04).sqrt())).abs() < 1e-4);
     }
@@ -617,17 +703,41 @@ mod tests {
             let x = (i % 7) as f32 * 3.0;
             let y = (i / 7) as f32 * 3.0;
             let shape = match i % 4 {
-                0 => Shape::Box { c: V3::new(x, y, 1.0), h: V3::new(1.0, 0.5, 1.0), cos: 0.8, sin: 0.6 },
-                1 => Shape::Cylinder { cx: x, cy: y, r: 0.7, z0: 0.0, z1: 2.0 + i as f32 * 0.1 },
-                2 => Shape::Cone { cx: x, cy: y, r: 1.0, z0: 0.5, z1: 3.0 },
-                _ => Shape::Sphere { c: V3::new(x, y, 1.5), r: 0.9 },
+                0 => Shape::Box {
+                    c: V3::new(x, y, 1.0),
+                    h: V3::new(1.0, 0.5, 1.0),
+                    cos: 0.8,
+                    sin: 0.6,
+                },
+                1 => Shape::Cylinder {
+                    cx: x,
+                    cy: y,
+                    r: 0.7,
+                    z0: 0.0,
+                    z1: 2.0 + i as f32 * 0.1,
+                },
+                2 => Shape::Cone {
+                    cx: x,
+                    cy: y,
+                    r: 1.0,
+                    z0: 0.5,
+                    z1: 3.0,
+                },
+                _ => Shape::Sphere {
+                    c: V3::new(x, y, 1.5),
+                    r: 0.9,
+                },
             };
             prims.push(prim(shape));
         }
         let bvh = Bvh::build(prims.clone());
         for k in 0..500 {
             let a = k as f32 * 0.37;
-            let o = V3::new(8.0 + 20.0 * a.cos(), 8.0 + 20.0 * a.sin(), 6.0 + (k % 5) as f32);
+            let o = V3::new(
+                8.0 + 20.0 * a.cos(),
+                8.0 + 20.0 * a.sin(),
+                6.0 + (k % 5) as f32,
+            );
             let target = V3::new((k % 23) as f32, (k % 17) as f32, 0.5);
             let ray = Ray::new(o, (target - o).normalized());
             let mut best = f32::INFINITY;
@@ -639,7 +749,9 @@ mod tests {
                     best = t;
                 }
             }
-            let got = bvh.intersect(&ray, f32::INFINITY).map_or(f32::INFINITY, |h| h.t);
+            let got = bvh
+                .intersect(&ray, f32::INFINITY)
+                .map_or(f32::INFINITY, |h| h.t);
             assert_eq!(got, best, "ray {k}");
         }
     }

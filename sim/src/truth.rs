@@ -20,7 +20,10 @@ pub struct TruthConfig {
 
 impl Default for TruthConfig {
     fn default() -> Self {
-        Self { min_points: 20, polylabel_precision_m: 0.02 }
+        Self {
+            min_points: 20,
+            polylabel_precision_m: 0.02,
+        }
     }
 }
 
@@ -79,12 +82,19 @@ pub fn ground_truth(
         .filter(|&i| per_building[i].len() >= config.min_points)
         .collect();
     order.sort_by_key(|&i| (i != target, i));
-    let params = PolylabelParams { precision_m: config.polylabel_precision_m, ..Default::default() };
+    let params = PolylabelParams {
+        precision_m: config.polylabel_precision_m,
+        ..Default::default()
+    };
     let mut roofs = Vec::new();
     for bi in order {
         let b = &world.buildings[bi];
         let hull = convex_hull(&per_building[bi]);
-        let shell = if hull.len() >= 3 { clip_convex(&b.roof_interior(), &hull) } else { Vec::new() };
+        let shell = if hull.len() >= 3 {
+            clip_convex(&b.roof_interior(), &hull)
+        } else {
+            Vec::new()
+        };
         let obstacles: Vec<ObstacleTruth> = b
             .assets
             .iter()
@@ -112,7 +122,11 @@ pub fn ground_truth(
         }
         // Spelled with a default tail so that fields the geometry crate adds keep their defaults.
         #[allow(clippy::needless_update)]
-        let landable_region = Polygon { shell, holes, ..Default::default() };
+        let landable_region = Polygon {
+            shell,
+            holes,
+            ..Default::default()
+        };
         let (best_point, best_radius_m) = if landable_region.shell.len() >= 3 {
             let pole = polylabel(&landable_region, &params)
                 .map_err(|e| SimError::Geometry(e.to_string()))?;
@@ -219,7 +233,14 @@ mod tests {
 
     #[test]
     fn hull_and_clip_of_squares() {
-        let pts = [[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0], [1.0, 0.0]];
+        let pts = [
+            [0.0, 0.0],
+            [2.0, 0.0],
+            [2.0, 2.0],
+            [0.0, 2.0],
+            [1.0, 1.0],
+            [1.0, 0.0],
+        ];
         let h = convex_hull(&pts);
         assert_eq!(h.len(), 4);
         assert!((ring_area(&h) - 4.0).abs() < 1e-12);

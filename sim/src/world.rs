@@ -6,10 +6,10 @@ use landing_geometry::SemanticClass;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
+use crate::SimError;
 use crate::assets::{AssetDistribution, AssetKind, sample_counts};
 use crate::math::V3;
 use crate::scene::{Bvh, Material, NO_PRIM, Prim, Shape, Texture};
-use crate::SimError;
 
 /// Parameters of a city. `Default` is a 4×4-block Manhattan-like city.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,16 +45,32 @@ impl WorldConfig {
     /// Checks every field; called by [`World::generate`].
     pub fn validate(&self) -> Result<(), SimError> {
         if self.blocks_x == 0 || self.blocks_x > 64 {
-            return Err(SimError::invalid("blocks_x", self.blocks_x, "must be in 1..=64"));
+            return Err(SimError::invalid(
+                "blocks_x",
+                self.blocks_x,
+                "must be in 1..=64",
+            ));
         }
         if self.blocks_y == 0 || self.blocks_y > 64 {
-            return Err(SimError::invalid("blocks_y", self.blocks_y, "must be in 1..=64"));
+            return Err(SimError::invalid(
+                "blocks_y",
+                self.blocks_y,
+                "must be in 1..=64",
+            ));
         }
         if !(20.0..=400.0).contains(&self.block_size_m) {
-            return Err(SimError::invalid("block_size_m", self.block_size_m, "must be in 20..=400"));
+            return Err(SimError::invalid(
+                "block_size_m",
+                self.block_size_m,
+                "must be in 20..=400",
+            ));
         }
         if !(4.0..=100.0).contains(&self.street_width_m) {
-            return Err(SimError::invalid("street_width_m", self.street_width_m, "must be in 4..=100"));
+            return Err(SimError::invalid(
+                "street_width_m",
+                self.street_width_m,
+                "must be in 4..=100",
+            ));
         }
         let (lo, hi) = self.height_range_m;
         if !(lo >= 3.0 && hi >= lo && hi <= 500.0) {
@@ -64,7 +80,11 @@ impl WorldConfig {
                 "must satisfy 3 <= min <= max <= 500",
             ));
         }
-        if let AssetDistribution::Uniform { min_total, max_total } = self.assets {
+        if let AssetDistribution::Uniform {
+            min_total,
+            max_total,
+        } = self.assets
+        {
             if min_total > max_total || max_total > 100 {
                 return Err(SimError::invalid(
                     "assets",
@@ -102,12 +122,18 @@ impl Building {
     /// The walkable roof inside the parapet (counter-clockwise, not closed).
     pub fn roof_interior(&self) -> Vec<[f64; 2]> {
         let t = self.parapet_thickness_m;
-        rect([self.min[0] + t, self.min[1] + t], [self.max[0] - t, self.max[1] - t])
+        rect(
+            [self.min[0] + t, self.min[1] + t],
+            [self.max[0] - t, self.max[1] - t],
+        )
     }
 
     /// Centre of the footprint.
     pub fn center(&self) -> [f64; 2] {
-        [(self.min[0] + self.max[0]) / 2.0, (self.min[1] + self.max[1]) / 2.0]
+        [
+            (self.min[0] + self.max[0]) / 2.0,
+            (self.min[1] + self.max[1]) / 2.0,
+        ]
     }
 
     /// Footprint size (x, y), metres.
@@ -139,7 +165,12 @@ impl Asset {
         let [hx, hy] = self.half_extents;
         [(-hx, -hy), (hx, -hy), (hx, hy), (-hx, hy)]
             .iter()
-            .map(|&(x, y)| [self.center[0] + c * x - s * y, self.center[1] + s * x + c * y])
+            .map(|&(x, y)| {
+                [
+                    self.center[0] + c * x - s * y,
+                    self.center[1] + s * x + c * y,
+                ]
+            })
             .collect()
     }
 }
@@ -182,7 +213,11 @@ impl World {
                 for (lo, hi) in lots {
                     let mut setback = [0.0f64; 4];
                     for s in &mut setback {
-                        *s = if rng.random_bool(0.4) { 0.0 } else { rng.random_range(0.5..3.0) };
+                        *s = if rng.random_bool(0.4) {
+                            0.0
+                        } else {
+                            rng.random_range(0.5..3.0)
+                        };
                     }
                     let min = [lo[0] + setback[0], lo[1] + setback[1]];
                     let max = [hi[0] - setback[2], hi[1] - setback[3]];
@@ -190,14 +225,26 @@ impl World {
                         continue;
                     }
                     let (hlo, hhi) = config.height_range_m;
-                    let height_m = if hhi > hlo { rng.random_range(hlo..hhi) } else { hlo };
+                    let height_m = if hhi > hlo {
+                        rng.random_range(hlo..hhi)
+                    } else {
+                        hlo
+                    };
                     let has_parapet = rng.random_bool(0.8);
                     buildings.push(Building {
                         min,
                         max,
                         height_m: (height_m * 4.0).round() / 4.0,
-                        parapet_height_m: if has_parapet { rng.random_range(0.3..1.1) } else { 0.0 },
-                        parapet_thickness_m: if has_parapet { rng.random_range(0.2..0.45) } else { 0.0 },
+                        parapet_height_m: if has_parapet {
+                            rng.random_range(0.3..1.1)
+                        } else {
+                            0.0
+                        },
+                        parapet_thickness_m: if has_parapet {
+                            rng.random_range(0.2..0.45)
+                        } else {
+                            0.0
+                        },
                         assets: Vec::new(),
                     });
                 }
@@ -221,7 +268,9 @@ impl World {
                 match place_asset(kind, b, bi, &assets, &mut rng) {
                     Some(asset) => {
                         let ai = assets.len();
-                        asset_prims(&asset, b.height_m, bi as u32, ai as u32, &mut rng, &mut prims);
+                        asset_prims(
+                            &asset, b.height_m, bi as u32, ai as u32, &mut rng, &mut prims,
+                        );
                         buildings[bi].assets.push(ai);
                         assets.push(asset);
                     }
@@ -232,7 +281,11 @@ impl World {
 
         let sun_az = rng.random_range(0.0..std::f32::consts::TAU);
         let sun_el = rng.random_range(35f32..75.0).to_radians();
-        let sun_dir = V3::new(sun_el.cos() * sun_az.cos(), sun_el.cos() * sun_az.sin(), sun_el.sin());
+        let sun_dir = V3::new(
+            sun_el.cos() * sun_az.cos(),
+            sun_el.cos() * sun_az.sin(),
+            sun_el.sin(),
+        );
         let ambient = rng.random_range(0.3..0.45);
         Ok(World {
             seed,
@@ -258,7 +311,12 @@ impl World {
 }
 
 fn rect(min: [f64; 2], max: [f64; 2]) -> Vec<[f64; 2]> {
-    vec![[min[0], min[1]], [max[0], min[1]], [max[0], max[1]], [min[0], max[1]]]
+    vec![
+        [min[0], min[1]],
+        [max[0], min[1]],
+        [max[0], max[1]],
+        [min[0], max[1]],
+    ]
 }
 
 /// Guillotine split of a block into lots of 14-40 m.
@@ -293,13 +351,18 @@ fn jitter(rng: &mut SmallRng, base: [f32; 3], amount: f32) -> [f32; 3] {
     let k = rng.random_range(1.0 - amount..1.0 + amount);
     let mut c = [0.0; 3];
     for i in 0..3 {
-        c[i] = (base[i] * k * rng.random_range(1.0 - amount / 2.0..1.0 + amount / 2.0)).clamp(0.0, 1.0);
+        c[i] = (base[i] * k * rng.random_range(1.0 - amount / 2.0..1.0 + amount / 2.0))
+            .clamp(0.0, 1.0);
     }
     c
 }
 
 fn material(rng: &mut SmallRng, base: [f32; 3], texture: Texture) -> Material {
-    Material { albedo: jitter(rng, base, 0.15), texture, salt: rng.random() }
+    Material {
+        albedo: jitter(rng, base, 0.15),
+        texture,
+        salt: rng.random(),
+    }
 }
 
 const ROOF_LOOKS: [([f32; 3], Texture); 7] = [
@@ -326,7 +389,12 @@ fn building_prims(b: &Building, bi: u32, rng: &mut SmallRng, out: &mut Vec<Prim>
     let roof = material(rng, rl, rt);
     let wall = material(rng, wl, wt);
     // One material per primitive: the body's roof look, and walls on the parapet's sides.
-    let (x0, y0, x1, y1) = (b.min[0] as f32, b.min[1] as f32, b.max[0] as f32, b.max[1] as f32);
+    let (x0, y0, x1, y1) = (
+        b.min[0] as f32,
+        b.min[1] as f32,
+        b.max[0] as f32,
+        b.max[1] as f32,
+    );
     let h = b.height_m as f32;
     let roof_class = SemanticClass::BuildingRooftop as u8;
     let wall_class = SemanticClass::BuildingWall as u8;
@@ -351,14 +419,31 @@ fn building_prims(b: &Building, bi: u32, rng: &mut SmallRng, out: &mut Vec<Prim>
         let coping = material(rng, [0.6, 0.58, 0.55], Texture::Plain);
         let z = h + ph / 2.0;
         let walls = [
-            (V3::new((x0 + x1) / 2.0, y0 + pt / 2.0, z), V3::new((x1 - x0) / 2.0, pt / 2.0, ph / 2.0)),
-            (V3::new((x0 + x1) / 2.0, y1 - pt / 2.0, z), V3::new((x1 - x0) / 2.0, pt / 2.0, ph / 2.0)),
-            (V3::new(x0 + pt / 2.0, (y0 + y1) / 2.0, z), V3::new(pt / 2.0, (y1 - y0) / 2.0 - pt, ph / 2.0)),
-            (V3::new(x1 - pt / 2.0, (y0 + y1) / 2.0, z), V3::new(pt / 2.0, (y1 - y0) / 2.0 - pt, ph / 2.0)),
+            (
+                V3::new((x0 + x1) / 2.0, y0 + pt / 2.0, z),
+                V3::new((x1 - x0) / 2.0, pt / 2.0, ph / 2.0),
+            ),
+            (
+                V3::new((x0 + x1) / 2.0, y1 - pt / 2.0, z),
+                V3::new((x1 - x0) / 2.0, pt / 2.0, ph / 2.0),
+            ),
+            (
+                V3::new(x0 + pt / 2.0, (y0 + y1) / 2.0, z),
+                V3::new(pt / 2.0, (y1 - y0) / 2.0 - pt, ph / 2.0),
+            ),
+            (
+                V3::new(x1 - pt / 2.0, (y0 + y1) / 2.0, z),
+                V3::new(pt / 2.0, (y1 - y0) / 2.0 - pt, ph / 2.0),
+            ),
         ];
         for (c, hh) in walls {
             out.push(Prim {
-                shape: Shape::Box { c, h: hh, cos: 1.0, sin: 0.0 },
+                shape: Shape::Box {
+                    c,
+                    h: hh,
+                    cos: 1.0,
+                    sin: 0.0,
+                },
                 top_class: roof_class,
                 side_class: wall_class,
                 material: coping,
@@ -427,7 +512,10 @@ fn place_asset(
 ) -> Option<Asset> {
     let (half, height) = asset_size(kind, rng);
     let margin = b.parapet_thickness_m + 0.4;
-    let (lo, hi) = ([b.min[0] + margin, b.min[1] + margin], [b.max[0] - margin, b.max[1] - margin]);
+    let (lo, hi) = (
+        [b.min[0] + margin, b.min[1] + margin],
+        [b.max[0] - margin, b.max[1] - margin],
+    );
     if hi[0] - lo[0] < 1.0 || hi[1] - lo[1] < 1.0 {
         return None;
     }
@@ -438,10 +526,23 @@ fn place_asset(
         } else {
             rng.random_range(0.0..std::f64::consts::TAU)
         };
-        let center = [rng.random_range(lo[0]..hi[0]), rng.random_range(lo[1]..hi[1])];
-        let a = Asset { kind, building: bi, center, yaw, half_extents: half, height_m: height };
+        let center = [
+            rng.random_range(lo[0]..hi[0]),
+            rng.random_range(lo[1]..hi[1]),
+        ];
+        let a = Asset {
+            kind,
+            building: bi,
+            center,
+            yaw,
+            half_extents: half,
+            height_m: height,
+        };
         let fp = a.footprint();
-        if fp.iter().any(|p| p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1]) {
+        if fp
+            .iter()
+            .any(|p| p[0] < lo[0] || p[0] > hi[0] || p[1] < lo[1] || p[1] > hi[1])
+        {
             continue;
         }
         let clear = b.assets.iter().all(|&j| !obb_overlap(&a, &assets[j], 0.3));
@@ -488,7 +589,10 @@ struct Placer {
 
 impl Placer {
     fn at(&self, lx: f32, ly: f32) -> (f32, f32) {
-        (self.cx + self.cos * lx - self.sin * ly, self.cy + self.sin * lx + self.cos * ly)
+        (
+            self.cx + self.cos * lx - self.sin * ly,
+            self.cy + self.sin * lx + self.cos * ly,
+        )
     }
 
     fn prim(&self, shape: Shape, material: Material) -> Prim {
@@ -518,17 +622,41 @@ impl Placer {
 
     fn cylinder(&self, lx: f32, ly: f32, r: f32, z0: f32, z1: f32, m: Material) -> Prim {
         let (cx, cy) = self.at(lx, ly);
-        self.prim(Shape::Cylinder { cx, cy, r, z0: self.z + z0, z1: self.z + z1 }, m)
+        self.prim(
+            Shape::Cylinder {
+                cx,
+                cy,
+                r,
+                z0: self.z + z0,
+                z1: self.z + z1,
+            },
+            m,
+        )
     }
 
     fn cone(&self, lx: f32, ly: f32, r: f32, z0: f32, z1: f32, m: Material) -> Prim {
         let (cx, cy) = self.at(lx, ly);
-        self.prim(Shape::Cone { cx, cy, r, z0: self.z + z0, z1: self.z + z1 }, m)
+        self.prim(
+            Shape::Cone {
+                cx,
+                cy,
+                r,
+                z0: self.z + z0,
+                z1: self.z + z1,
+            },
+            m,
+        )
     }
 
     fn sphere(&self, lx: f32, ly: f32, z: f32, r: f32, m: Material) -> Prim {
         let (x, y) = self.at(lx, ly);
-        self.prim(Shape::Sphere { c: V3::new(x, y, self.z + z), r }, m)
+        self.prim(
+            Shape::Sphere {
+                c: V3::new(x, y, self.z + z),
+                r,
+            },
+            m,
+        )
     }
 }
 
@@ -648,7 +776,12 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
             out.push(p.cone(0.0, 0.0, hx, h - 0.6, h, m));
         }
         AssetKind::Tarp => {
-            let looks = [[0.15, 0.30, 0.65], [0.20, 0.45, 0.25], [0.55, 0.55, 0.50], [0.60, 0.40, 0.15]];
+            let looks = [
+                [0.15, 0.30, 0.65],
+                [0.20, 0.45, 0.25],
+                [0.55, 0.55, 0.50],
+                [0.60, 0.40, 0.15],
+            ];
             let look = looks[rng.random_range(0..looks.len())];
             let m = material(rng, look, Texture::Plain);
             out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
@@ -684,13 +817,21 @@ mod tests {
 
     #[test]
     fn assets_stay_on_their_roof_and_apart() {
-        let w = World::generate(9, &WorldConfig { assets: AssetDistribution::TRAINING, ..Default::default() })
-            .expect("world");
+        let w = World::generate(
+            9,
+            &WorldConfig {
+                assets: AssetDistribution::TRAINING,
+                ..Default::default()
+            },
+        )
+        .expect("world");
         assert!(w.buildings.len() >= 16, "{} buildings", w.buildings.len());
         for b in &w.buildings {
             for (k, &i) in b.assets.iter().enumerate() {
                 for p in w.assets[i].footprint() {
-                    assert!(p[0] > b.min[0] && p[0] < b.max[0] && p[1] > b.min[1] && p[1] < b.max[1]);
+                    assert!(
+                        p[0] > b.min[0] && p[0] < b.max[0] && p[1] > b.min[1] && p[1] < b.max[1]
+                    );
                 }
                 for &j in &b.assets[k + 1..] {
                     assert!(!obb_overlap(&w.assets[i], &w.assets[j], 0.0));
@@ -701,7 +842,14 @@ mod tests {
 
     #[test]
     fn bad_config_names_the_field() {
-        let err = World::generate(1, &WorldConfig { blocks_x: 0, ..Default::default() }).unwrap_err();
+        let err = World::generate(
+            1,
+            &WorldConfig {
+                blocks_x: 0,
+                ..Default::default()
+            },
+        )
+        .unwrap_err();
         assert!(err.to_string().contains("blocks_x"), "{err}");
     }
 }

@@ -3,8 +3,8 @@
 
 use std::path::PathBuf;
 
-use landing_geometry::polylabel::signed_distance;
 use landing_geometry::Polygon;
+use landing_geometry::polylabel::signed_distance;
 use landing_proto::v1;
 use landing_sim::flight::FlightConfig;
 use landing_sim::recording::{
@@ -15,7 +15,10 @@ use nalgebra::Point3;
 fn config(seed: u64, frames: u32) -> RecordConfig {
     RecordConfig {
         seed,
-        flight: FlightConfig { frames, ..Default::default() },
+        flight: FlightConfig {
+            frames,
+            ..Default::default()
+        },
         width: 160,
         height: 120,
         ..Default::default()
@@ -41,8 +44,11 @@ fn same_seed_gives_identical_bytes_and_other_seeds_differ() {
 }
 
 fn decode_png_l8(img: &v1::CameraImage) -> (u32, u32, Vec<u8>) {
-    let Some(v1::camera_image::Image::Compressed(c)) = &img.image else { panic!("no compressed image") };
-    let dynimg = image::load_from_memory_with_format(&c.data, image::ImageFormat::Png).expect("png");
+    let Some(v1::camera_image::Image::Compressed(c)) = &img.image else {
+        panic!("no compressed image")
+    };
+    let dynimg =
+        image::load_from_memory_with_format(&c.data, image::ImageFormat::Png).expect("png");
     let l = dynimg.to_luma8();
     (l.width(), l.height(), l.into_raw())
 }
@@ -63,7 +69,8 @@ fn projection_agreement(frames: &[landing_sim::recording::RecordedFrame]) -> (us
         assert_eq!((w, h), (cal.width, cal.height));
         let stride = pc.point_stride as usize;
         for chunk in pc.data.chunks_exact(stride) {
-            let f = |o: usize| f32::from_le_bytes([chunk[o], chunk[o + 1], chunk[o + 2], chunk[o + 3]]);
+            let f =
+                |o: usize| f32::from_le_bytes([chunk[o], chunk[o + 1], chunk[o + 2], chunk[o + 3]]);
             let p = Point3::new(f64::from(f(0)), f64::from(f(4)), f64::from(f(8)));
             let class = chunk[16];
             let c = t_cw * (t_wl * p);
@@ -94,14 +101,26 @@ fn projection_agreement(frames: &[landing_sim::recording::RecordedFrame]) -> (us
 #[test]
 fn lidar_points_project_onto_their_own_class_in_the_label_image() {
     for seed in [1u64, 2, 5] {
-        let cfg = RecordConfig { width: 320, height: 240, ..config(seed, 8) };
+        let cfg = RecordConfig {
+            width: 320,
+            height: 240,
+            ..config(seed, 8)
+        };
         let frames = read_recording_bytes(&record(&cfg)).expect("read back");
         assert_eq!(frames.len(), 8);
         let (agree, checked) = projection_agreement(&frames);
-        assert!(checked > 8 * 800, "seed {seed}: only {checked} points away from label edges");
+        assert!(
+            checked > 8 * 800,
+            "seed {seed}: only {checked} points away from label edges"
+        );
         let ratio = agree as f64 / checked as f64;
-        eprintln!("seed {seed}: {agree}/{checked} = {ratio:.4} of points agree with the label image");
-        assert!(ratio >= 0.99, "seed {seed}: {agree}/{checked} = {ratio:.4} agree");
+        eprintln!(
+            "seed {seed}: {agree}/{checked} = {ratio:.4} of points agree with the label image"
+        );
+        assert!(
+            ratio >= 0.99,
+            "seed {seed}: {agree}/{checked} = {ratio:.4} agree"
+        );
     }
 }
 
@@ -130,13 +149,32 @@ fn best_landing_point_is_inside_the_free_roof_at_its_radius() {
             let c = roof.best_landing_point.as_ref().expect("point");
             let d = signed_distance(&poly, [c.x, c.y]);
             assert!(d > 0.0, "best point outside the free roof (d = {d})");
-            assert!((d - roof.best_safe_radius_m).abs() < 1e-6, "{d} vs {}", roof.best_safe_radius_m);
+            assert!(
+                (d - roof.best_safe_radius_m).abs() < 1e-6,
+                "{d} vs {}",
+                roof.best_safe_radius_m
+            );
             // No obstacle footprint contains the point.
             for o in &roof.obstacles {
-                let fp: Vec<[f64; 2]> = o.footprint.as_ref().expect("fp").points.iter().map(|q| [q.x, q.y]).collect();
+                let fp: Vec<[f64; 2]> = o
+                    .footprint
+                    .as_ref()
+                    .expect("fp")
+                    .points
+                    .iter()
+                    .map(|q| [q.x, q.y])
+                    .collect();
                 #[allow(clippy::needless_update)]
-                let op = Polygon { shell: fp, holes: vec![], ..Default::default() };
-                assert!(signed_distance(&op, [c.x, c.y]) < 0.0, "best point inside a {}", o.asset);
+                let op = Polygon {
+                    shell: fp,
+                    holes: vec![],
+                    ..Default::default()
+                };
+                assert!(
+                    signed_distance(&op, [c.x, c.y]) < 0.0,
+                    "best point inside a {}",
+                    o.asset
+                );
             }
             assert!((c.z - roof.height_m).abs() < 1e-9);
         }
@@ -160,7 +198,11 @@ fn committed_sample_recording_replays() {
 fn committed_sample_ply_has_world_points_with_classes() {
     let bytes = std::fs::read(samples().join("roof.ply")).expect("samples/roof.ply");
     assert!(bytes.len() < 1_000_000);
-    let end = bytes.windows(11).position(|w| w == b"end_header\n").expect("header") + 11;
+    let end = bytes
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("header")
+        + 11;
     let header = std::str::from_utf8(&bytes[..end]).expect("ascii header");
     assert!(header.contains("format binary_little_endian 1.0"));
     assert!(header.contains("property uchar class"));

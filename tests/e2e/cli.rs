@@ -27,6 +27,15 @@ fn sites_of(r: &v1::FrameResult) -> Vec<(f64, [f64; 3])> {
         .collect()
 }
 
+/// JSON numbers parse back to within an ulp or so; compare sites with a tolerance.
+fn assert_same_sites(got: &[(f64, [f64; 3])], want: &[(f64, [f64; 3])]) {
+    assert_eq!(got.len(), want.len(), "{got:?} vs {want:?}");
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()));
+    for (g, w) in got.iter().zip(want) {
+        assert!(close(g.0, w.0) && (0..3).all(|k| close(g.1[k], w.1[k])), "{g:?} vs {w:?}");
+    }
+}
+
 fn sites_of_json(v: &Value) -> Vec<(f64, [f64; 3])> {
     v["sites"]
         .as_array()
@@ -66,7 +75,7 @@ async fn detect_on_a_recording_and_on_a_ply_matches_the_pipeline() {
     assert_eq!(code, exit::OK, "{out}");
     let v: Value = serde_json::from_str(&out).expect("json");
     let want = in_process(server.reference(), &s.frames[last].frame, &mode(SegmentationMode::PointClasses)).expect("pipeline");
-    assert_eq!(sites_of_json(&v), sites_of(&want));
+    assert_same_sites(&sites_of_json(&v), &sites_of(&want));
     assert!(!want.sites.is_empty());
 
     // The same scan as a PLY in world coordinates with classes.
@@ -92,7 +101,7 @@ async fn detect_on_a_recording_and_on_a_ply_matches_the_pipeline() {
     let frame = FrameBuilder::new(0, PointCloudBuilder::new(&pts).classes(&classes).build().expect("cloud")).build();
     let want = in_process(server.reference(), &frame, &mode(SegmentationMode::PointClasses)).expect("pipeline");
     let v: Value = serde_json::from_str(&out).expect("json");
-    assert_eq!(sites_of_json(&v), sites_of(&want));
+    assert_same_sites(&sites_of_json(&v), &sites_of(&want));
 
     let (code, table) = landing(&["--server", &server.url, "detect", path, "--frame", &last.to_string()]).await;
     assert_eq!(code, exit::OK);
@@ -126,7 +135,7 @@ async fn replay_writes_json_lines_and_mcap_equal_to_the_pipeline() {
     for (line, want) in lines.iter().zip(&expected) {
         assert_eq!(line["sequence"], want.sequence);
         assert_eq!(line["outcome"], "ok");
-        assert_eq!(sites_of_json(&line["result"]), sites_of(want));
+        assert_same_sites(&sites_of_json(&line["result"]), &sites_of(want));
     }
 
     let bytes = std::fs::read(&mcap).expect("mcap");

@@ -93,7 +93,7 @@ async fn shutdown_during_a_stream_drains_it() {
 fn server_process() {
     if let Some(config) = std::env::var_os("LANDING_E2E_SERVER_CONFIG") {
         let args = ["landing-server".into(), "serve".into(), "--config".into(), config];
-        let code = landing_server::cli_main_from(args);
+        let code = landing_server::cli::cli_main_from(args);
         std::process::exit(if code == std::process::ExitCode::SUCCESS { 0 } else { 1 });
     }
 }

@@ -2,7 +2,6 @@
 //! MCAP files, the in-process pipeline as the reference, and [`check`].
 
 use std::collections::HashMap;
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
@@ -60,7 +59,6 @@ pub fn server_config() -> Config {
 
 /// A server running in this process.
 pub struct TestServer {
-    pub addr: SocketAddr,
     pub url: String,
     pub config: Config,
     running: Option<RunningServer>,
@@ -79,7 +77,6 @@ impl TestServer {
         let running = landing_server::start(config.clone(), listener).await.expect("start the server");
         let scheme = if config.tls.cert_path.as_os_str().is_empty() { "http" } else { "https" };
         Self {
-            addr: running.addr,
             url: format!("{scheme}://{}", running.addr),
             config,
             running: Some(running),
@@ -133,7 +130,6 @@ fn landing_geometry_defaults() -> landing_geometry::Params {
 
 /// A seeded simulated flight, recorded as MCAP: the frames with their ground truth, and the file.
 pub struct Scene {
-    pub seed: u64,
     pub frames: Vec<RecordedFrame>,
     pub path: PathBuf,
 }
@@ -158,7 +154,7 @@ pub fn scene(seed: u64) -> Arc<Scene> {
             std::fs::write(&path, &bytes).expect("write the recording");
             let frames = read_recording_bytes(&bytes).expect("read the recording back");
             assert_eq!(frames.len(), SCENE_FRAMES as usize);
-            Arc::new(Scene { seed, frames, path })
+            Arc::new(Scene { frames, path })
         })
         .clone()
 }

@@ -35,6 +35,9 @@ pub struct Obstacle {
     pub class: u8,
     /// Footprint in the horizontal plane.
     pub footprint: Polygon2,
+    /// Whether any LiDAR point of the frame hit it (an unseen obstacle cannot be avoided by
+    /// geometry; only the camera can reveal it).
+    pub seen: bool,
 }
 
 /// One roof in view, with what is on it.
@@ -58,6 +61,8 @@ pub struct RoofTruth {
     /// Whether IoU and radius ratio are scored on this roof. Raised roofs (a small building's top
     /// on a roof) are only used to judge sites that stand on them.
     pub scored: bool,
+    /// The roof the flight approaches (the others are neighbours in view).
+    pub target: bool,
 }
 
 /// A returned landing site, reduced to what the metrics need.
@@ -81,8 +86,9 @@ pub struct Site {
 pub enum Verdict {
     /// The circle is clear of every obstacle and inside the roof (within the tolerance).
     Safe,
-    /// The circle reaches `intrusion_m` into an obstacle of class `class`.
-    Obstacle { class: u8, intrusion_m: f64 },
+    /// The circle reaches `intrusion_m` into an obstacle of class `class`; `seen` tells whether
+    /// any LiDAR point hit that obstacle.
+    Obstacle { class: u8, intrusion_m: f64, seen: bool },
     /// The circle reaches `intrusion_m` past the edge of the walkable roof.
     OutsideRoof { intrusion_m: f64 },
     /// The centre is on no roof of the ground truth (the street, or a roof not in view).
@@ -113,6 +119,8 @@ pub struct RoofEval {
     pub roof: usize,
     /// Its identifier in the world.
     pub roof_id: u32,
+    /// Whether it is the roof the flight approaches.
+    pub target: bool,
     /// True landable area in the scanned region, square metres.
     pub truth_area_m2: f64,
     /// Radius of the largest circle in the true landable area.
@@ -182,7 +190,7 @@ pub fn judge_on_roof(center: P2, radius_m: f64, roof: &RoofTruth, tolerance_m: f
         let intrusion = radius_m + o.footprint.signed_distance(center);
         if intrusion > worst_intrusion {
             worst_intrusion = intrusion;
-            worst = Verdict::Obstacle { class: o.class, intrusion_m: intrusion };
+            worst = Verdict::Obstacle { class: o.class, intrusion_m: intrusion, seen: o.seen };
         }
     }
     let edge = radius_m - roof.interior.signed_distance(center);
@@ -260,6 +268,7 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
         out.roofs.push(RoofEval {
             roof: ri,
             roof_id: roof.id,
+            target: roof.target,
             truth_area_m2: truth.area(),
             truth_radius_m: truth_radius,
             stated_truth_radius_m: roof.stated_best_radius_m,
@@ -283,10 +292,11 @@ mod tests {
             outline: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
             interior: Polygon2::rect([0.3, 0.3], [19.7, 9.7]),
             height_m: 30.0,
-            obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]) }],
+            obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
             scanned: None,
             stated_best_radius_m: None,
             scored: true,
+            target: true,
         }
     }
 
@@ -305,7 +315,7 @@ mod tests {
         // Centre 1.5 m from the AC unit's edge with radius 2.5: 1 m into it, beyond 0.5 m.
         let s = site([7.5, 5.0], 2.5, Polygon2::default());
         match judge_site(&s, &[roof()], &MetricsParams::default()).verdict {
-            Verdict::Obstacle { class, intrusion_m } => {
+            Verdict::Obstacle { class, intrusion_m, .. } => {
                 assert_eq!(class, 8);
                 assert!((intrusion_m - 1.0).abs() < 1e-9);
             }

@@ -22,10 +22,11 @@
 //!     outline: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
 //!     interior: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
 //!     height_m: 30.0,
-//!     obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]) }],
+//!     obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
 //!     scanned: None,
 //!     stated_best_radius_m: None,
 //!     scored: true,
+//!     target: true,
 //! };
 //! let site = Site {
 //!     rank: 1,

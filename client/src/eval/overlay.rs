@@ -89,10 +89,11 @@ mod tests {
             outline: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
             interior: Polygon2::rect([0.3, 0.3], [19.7, 9.7]),
             height_m: 30.0,
-            obstacles: vec![Obstacle { class: 13, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]) }],
+            obstacles: vec![Obstacle { class: 13, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
             scanned: None,
             stated_best_radius_m: None,
             scored: true,
+            target: true,
         };
         let site = Site { rank: 1, polygon: roof.interior.clone(), center: [5.0, 5.0], plane_height_m: 30.0, radius_m: 3.0 };
         let e = judge_site(&site, std::slice::from_ref(&roof), &MetricsParams::default());

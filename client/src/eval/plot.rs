@@ -124,7 +124,7 @@ pub struct BarGroup {
 
 const LEFT: i64 = 90;
 const RIGHT: i64 = 20;
-const TOP: i64 = 50;
+const TOP: i64 = 64;
 const BOTTOM: i64 = 90;
 
 /// Grouped bars on a log axis with 95 % whiskers, like the paper's Fig. 5. Values are in

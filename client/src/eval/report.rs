@@ -104,6 +104,16 @@ pub struct ClassSummary {
     pub mean_covered: f64,
 }
 
+/// Results of one mode on the frames carrying one hard-case tag.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TagSummary {
+    pub tag: String,
+    pub frames: usize,
+    pub unsafe_sites: usize,
+    pub mean_iou: Option<f64>,
+    pub median_ratio: Option<f64>,
+}
+
 /// The summary of one mode.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModeSummary {
@@ -112,12 +122,19 @@ pub struct ModeSummary {
     pub failures: usize,
     pub sites: usize,
     pub unsafe_obstacle: usize,
+    /// Of those, into obstacles no LiDAR point hit.
+    pub unsafe_unseen: usize,
     pub unsafe_outside_roof: usize,
     pub off_roof: usize,
-    /// Roofs scored for IoU and radius ratio.
+    /// Target roofs (the one each flight approaches) scored for IoU and radius ratio; the
+    /// headline numbers below are over these.
     pub roofs: usize,
-    /// Scored roofs without any safe site.
+    /// Scored target roofs without any safe site.
     pub roofs_without_site: usize,
+    /// Every scored roof in view, neighbours included.
+    pub roofs_all: usize,
+    pub iou_all: Option<MeanCi>,
+    pub ratio_median_all: Option<f64>,
     pub iou: Option<MeanCi>,
     pub iou_median: Option<f64>,
     pub ratio_median: Option<f64>,
@@ -125,6 +142,8 @@ pub struct ModeSummary {
     pub ratio_median_ci: Option<(f64, f64)>,
     pub ratio: Option<MeanCi>,
     pub classes: Vec<ClassSummary>,
+    /// Per hard-case tag, in name order.
+    pub tags: Vec<TagSummary>,
     /// Per-step server time, milliseconds, in [`STEPS`] order.
     pub steps: Vec<Option<MeanCi>>,
     pub round_trip: Option<MeanCi>,
@@ -196,34 +215,50 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
             failures: failures.iter().filter(|f| f.mode == mode).count(),
             sites: 0,
             unsafe_obstacle: 0,
+            unsafe_unseen: 0,
             unsafe_outside_roof: 0,
             off_roof: 0,
             roofs: 0,
             roofs_without_site: 0,
+            roofs_all: 0,
+            iou_all: None,
+            ratio_median_all: None,
             iou: None,
             iou_median: None,
             ratio_median: None,
             ratio_median_ci: None,
             ratio: None,
             classes: Vec::new(),
+            tags: Vec::new(),
             steps: Vec::new(),
             round_trip: None,
         };
         let mut ious = Vec::new();
         let mut ratios = Vec::new();
+        let mut ious_all = Vec::new();
+        let mut ratios_all = Vec::new();
         let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
         for r in &recs {
             s.sites += r.eval.sites.len();
             for site in &r.eval.sites {
                 match site.verdict {
                     Verdict::Safe => continue,
-                    Verdict::Obstacle { .. } => s.unsafe_obstacle += 1,
+                    Verdict::Obstacle { seen, .. } => {
+                        s.unsafe_obstacle += 1;
+                        s.unsafe_unseen += usize::from(!seen);
+                    }
                     Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
                     Verdict::OffRoof => s.off_roof += 1,
                 }
                 unsafe_list.push((mode, r.frame.clone(), site.rank, site.verdict));
             }
             for roof in &r.eval.roofs {
+                s.roofs_all += 1;
+                ious_all.push(roof.iou);
+                ratios_all.push(roof.radius_ratio);
+                if !roof.target {
+                    continue;
+                }
                 s.roofs += 1;
                 if roof.best_safe_radius_m <= 0.0 {
                     s.roofs_without_site += 1;
@@ -238,6 +273,8 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
                 e.2 += o.covered_fraction;
             }
         }
+        s.iou_all = mean_ci95(&ious_all);
+        s.ratio_median_all = median(&ratios_all);
         s.iou = mean_ci95(&ious);
         s.iou_median = median(&ious);
         s.ratio = mean_ci95(&ratios);
@@ -251,6 +288,24 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
                 obstacles: n,
                 hit,
                 mean_covered: cov / n.max(1) as f64,
+            })
+            .collect();
+        let mut tag_names: Vec<&str> = recs.iter().flat_map(|r| r.tags.iter().map(String::as_str)).collect();
+        tag_names.sort_unstable();
+        tag_names.dedup();
+        s.tags = tag_names
+            .into_iter()
+            .map(|tag| {
+                let tagged: Vec<&&FrameRecord> = recs.iter().filter(|r| r.tags.iter().any(|t| t == tag)).collect();
+                let ious: Vec<f64> = tagged.iter().flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou)).collect();
+                let ratios: Vec<f64> = tagged.iter().flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.radius_ratio)).collect();
+                TagSummary {
+                    tag: tag.to_string(),
+                    frames: tagged.len(),
+                    unsafe_sites: tagged.iter().map(|r| r.eval.sites.iter().filter(|x| !x.verdict.is_safe()).count()).sum(),
+                    mean_iou: mean_ci95(&ious).map(|m| m.mean),
+                    median_ratio: median(&ratios),
+                }
             })
             .collect();
         s.steps = (0..STEPS.len())
@@ -281,17 +336,21 @@ impl Summary {
             row("sites returned", &|m| m.sites.to_string()),
             row("unsafe sites (all)", &|m| m.unsafe_sites().to_string()),
             row("  into an obstacle", &|m| m.unsafe_obstacle.to_string()),
+            row("    of which unseen by the LiDAR", &|m| m.unsafe_unseen.to_string()),
             row("  past the roof edge", &|m| m.unsafe_outside_roof.to_string()),
             row("  off every roof", &|m| m.off_roof.to_string()),
-            row("roofs scored", &|m| m.roofs.to_string()),
-            row("roofs without a safe site", &|m| m.roofs_without_site.to_string()),
-            row("polygon IoU, mean [95% CI]", &|m| ci(m.iou, 3)),
-            row("polygon IoU, median", &|m| opt(m.iou_median, 3)),
-            row("radius ratio, median [95% CI]", &|m| match (m.ratio_median, m.ratio_median_ci) {
+            row("target roofs scored", &|m| m.roofs.to_string()),
+            row("target roofs without a safe site", &|m| m.roofs_without_site.to_string()),
+            row("target polygon IoU, mean [95% CI]", &|m| ci(m.iou, 3)),
+            row("target polygon IoU, median", &|m| opt(m.iou_median, 3)),
+            row("target radius ratio, median [95% CI]", &|m| match (m.ratio_median, m.ratio_median_ci) {
                 (Some(v), Some((lo, hi))) => format!("{v:.3} [{lo:.3}, {hi:.3}]"),
                 (v, _) => opt(v, 3),
             }),
-            row("radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
+            row("target radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
+            row("all roofs in view scored", &|m| m.roofs_all.to_string()),
+            row("all roofs: polygon IoU, mean [95% CI]", &|m| ci(m.iou_all, 3)),
+            row("all roofs: radius ratio, median", &|m| opt(m.ratio_median_all, 3)),
             row("client round trip, ms", &|m| ci(m.round_trip, 1)),
         ]
     }
@@ -317,6 +376,32 @@ impl Summary {
             .collect()
     }
 
+    /// Per-tag rows: "frames, unsafe, IoU, ratio" per mode.
+    fn tag_rows(&self) -> Vec<(String, Vec<String>)> {
+        let mut tags: Vec<&str> = self.modes.iter().flat_map(|m| m.tags.iter().map(|t| t.tag.as_str())).collect();
+        tags.sort_unstable();
+        tags.dedup();
+        tags.into_iter()
+            .map(|tag| {
+                let cells = self
+                    .modes
+                    .iter()
+                    .map(|m| match m.tags.iter().find(|t| t.tag == tag) {
+                        Some(t) => format!(
+                            "{} fr, {} unsafe, IoU {}, ratio {}",
+                            t.frames,
+                            t.unsafe_sites,
+                            opt(t.mean_iou, 2),
+                            opt(t.median_ratio, 2)
+                        ),
+                        None => "-".into(),
+                    })
+                    .collect();
+                (tag.to_string(), cells)
+            })
+            .collect()
+    }
+
     fn step_rows(&self) -> Vec<(String, Vec<String>)> {
         STEPS
             .iter()
@@ -334,11 +419,11 @@ impl Summary {
         vec![
             (format!("{}: unsafe sites = {} (target 0)", mode.name(), m.unsafe_sites()), m.unsafe_sites() == 0 && m.frames > 0),
             (
-                format!("{}: mean polygon IoU = {} (target >= {})", mode.name(), opt(iou, 3), targets.min_mean_iou),
+                format!("{}: mean polygon IoU (target roofs) = {} (target >= {})", mode.name(), opt(iou, 3), targets.min_mean_iou),
                 iou.is_some_and(|v| v >= targets.min_mean_iou),
             ),
             (
-                format!("{}: median radius ratio = {} (target >= {})", mode.name(), opt(m.ratio_median, 3), targets.min_median_ratio),
+                format!("{}: median radius ratio (target roofs) = {} (target >= {})", mode.name(), opt(m.ratio_median, 3), targets.min_median_ratio),
                 m.ratio_median.is_some_and(|v| v >= targets.min_median_ratio),
             ),
         ]
@@ -352,6 +437,7 @@ impl Summary {
         for (title, rows) in [
             ("quality", self.main_rows()),
             ("obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)", self.class_rows()),
+            ("hard cases (frames, unsafe sites, mean IoU, median radius ratio)", self.tag_rows()),
             ("server time per step, ms: mean [95% CI]", self.step_rows()),
         ] {
             let _ = writeln!(s, "\n{title}");
@@ -373,6 +459,7 @@ impl Summary {
         for (title, rows) in [
             ("Quality", self.main_rows()),
             ("Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)", self.class_rows()),
+            ("Hard cases (frames, unsafe sites, mean IoU, median radius ratio)", self.tag_rows()),
             ("Server time per step, ms: mean [95 % CI]", self.step_rows()),
         ] {
             let _ = writeln!(s, "\n#### {title}\n");
@@ -428,15 +515,19 @@ impl Summary {
                 .map(|m| (m.mode.name(), records.iter().filter(|r| r.mode == m.mode).flat_map(f).collect()))
                 .collect()
         };
-        let ratios = per_mode(&|r| r.eval.roofs.iter().map(|x| x.radius_ratio).collect());
+        let ratios = per_mode(&|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.radius_ratio).collect());
         let hi = ratios.iter().flat_map(|(_, v)| v.iter().copied()).fold(1.2f64, f64::max).min(3.0);
         save(
-            "Radius ratio (returned / true best) per mode",
+            "Radius ratio (returned / true best) on the target roof, per mode",
             "radius_ratio.png",
-            box_plot("RADIUS RATIO: RETURNED / TRUE BEST", &ratios, (0.0, hi), Some(0.9)),
+            box_plot("TARGET ROOF: RADIUS RATIO, RETURNED / TRUE BEST", &ratios, (0.0, hi), Some(0.9)),
         )?;
-        let ious = per_mode(&|r| r.eval.roofs.iter().map(|x| x.iou).collect());
-        save("Polygon IoU per mode", "iou.png", box_plot("POLYGON IOU WITH TRUE LANDABLE AREA", &ious, (0.0, 1.0), Some(0.93)))?;
+        let ious = per_mode(&|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou).collect());
+        save(
+            "Polygon IoU with the true landable area on the target roof, per mode",
+            "iou.png",
+            box_plot("TARGET ROOF: POLYGON IOU WITH TRUE LANDABLE AREA", &ious, (0.0, 1.0), Some(0.93)),
+        )?;
         Ok(written)
     }
 }
@@ -444,7 +535,11 @@ impl Summary {
 fn verdict_text(v: &Verdict) -> String {
     match v {
         Verdict::Safe => "safe".into(),
-        Verdict::Obstacle { class, intrusion_m } => format!("{intrusion_m:.2} m into a {}", class_name(*class)),
+        Verdict::Obstacle { class, intrusion_m, seen } => format!(
+            "{intrusion_m:.2} m into a {}{}",
+            class_name(*class),
+            if *seen { "" } else { " (no LiDAR point on it)" }
+        ),
         Verdict::OutsideRoof { intrusion_m } => format!("{intrusion_m:.2} m past the roof edge"),
         Verdict::OffRoof => "centre on no roof".into(),
     }
@@ -516,6 +611,7 @@ mod tests {
                 roofs: vec![RoofEval {
                     roof: 0,
                     roof_id: 1,
+                    target: true,
                     truth_area_m2: 100.0,
                     truth_radius_m: 4.0,
                     stated_truth_radius_m: None,
@@ -531,7 +627,7 @@ mod tests {
 
     #[test]
     fn summary_counts_and_targets() {
-        let tarp = Verdict::Obstacle { class: 13, intrusion_m: 1.0 };
+        let tarp = Verdict::Obstacle { class: 13, intrusion_m: 1.0, seen: true };
         let records = vec![
             record(Mode::Geometry, "a#1", tarp, 0.8, 0.0),
             record(Mode::Geometry, "a#2", Verdict::Safe, 0.9, 0.8),

@@ -245,6 +245,7 @@ mod tests {
             scanned: None,
             stated_best_radius_m: None,
             scored: true,
+            target: true,
         };
         let mut sc = Scenario { name: "t#1".into(), tags: vec![], frame, roofs: vec![roof] };
         fill_scanned_regions(&mut sc, 0.2).unwrap();

@@ -76,7 +76,7 @@ fn ring(r: Option<&LinearRing>) -> Vec<P2> {
 pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
     let mut roofs = Vec::new();
     let mut raised = Vec::new();
-    for r in &truth.roofs {
+    for (k, r) in truth.roofs.iter().enumerate() {
         let outline = Polygon2::simple(ring(r.outline.as_ref()));
         let landable = r
             .landable_region
@@ -90,6 +90,7 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
             .map(|o| Obstacle {
                 class: u8::try_from(o.semantic_class).unwrap_or(0),
                 footprint: Polygon2::simple(ring(o.footprint.as_ref())),
+                seen: o.seen_by_lidar,
             })
             .collect();
         for o in &r.obstacles {
@@ -104,6 +105,7 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
                     scanned: None,
                     stated_best_radius_m: None,
                     scored: false,
+                    target: false,
                 });
             }
         }
@@ -117,6 +119,8 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
             scanned: (landable.shell.len() >= 3).then_some(landable),
             stated_best_radius_m: Some(r.best_safe_radius_m),
             scored: true,
+            // The ground truth lists the approached roof first.
+            target: k == 0 && r.building == truth.target_building,
         });
     }
     roofs.extend(raised);
