@@ -9,7 +9,8 @@
 #   3. images     the recipes agree with the config, the model, ONNX Runtime 1.31.1, dockerignore;
 #                 the GPU recipe's cargo flags resolve and turn on ort's `cuda` feature (cargo tree)
 #   4. contract   both server TOML files use only the config contract's sections, keys and types
-#   5. manifests  renders base, cpu, gpu, and cpu/gpu with the tls+servicemonitor components with
+#   5. manifests  renders base, cpu, gpu, and cpu/gpu with every component (tls, servicemonitor,
+#                 networkpolicy) with
 #                 `kubectl kustomize`; strict schema validation for Kubernetes 1.30 and 1.37; policy
 #                 (security context, probes vs ports, drain grace, selectors, references, GPU)
 #   6. selftest   breaks manifests and recipes one rule at a time: every check must fire
@@ -342,7 +343,7 @@ PY
 cluster_configs() {
   local rc=0 render envs grpc_port metrics_port
   make_stand_ins || { echo "openssl could not make a test certificate"; return 1; }
-  for render in cpu "cpu+tls+servicemonitor"; do
+  for render in cpu cpu+components; do
     envs=$(mktemp -p "$work")
     cp "$work/renders/$render/env" "$envs"
     echo "LANDING__AUTH__TOKENS_FILE=in-image" >> "$envs"

@@ -206,7 +206,8 @@ def all_renders(scratch: Path) -> dict[str, list[dict]]:
     renders = {"base": render(K8S / "base")}
     for overlay in OVERLAYS:
         renders[overlay] = render(K8S / "overlays" / overlay)
-        renders[f"{overlay}+{'+'.join(COMPONENTS)}"] = render_with_components(overlay, COMPONENTS, scratch)
+        # "<overlay>+components": the overlay with every component in COMPONENTS.
+        renders[f"{overlay}+components"] = render_with_components(overlay, COMPONENTS, scratch)
     return renders
 
 
@@ -698,13 +699,13 @@ def mutations() -> list[tuple[str, str, object]]:
         ("cpu", "a CPU variant asks for a GPU", lambda o: ctr(o)["resources"]["limits"].update({"nvidia.com/gpu": 1})),
         ("gpu", "nvidia.com/gpu", lambda o: ctr(o)["resources"]["limits"].pop("nvidia.com/gpu")),
         ("gpu", "not cuda", lambda o: ctr(o).update(env=[e for e in ctr(o)["env"] if "EXECUTION_PROVIDER" not in e["name"]])),
-        ("gpu+tls+servicemonitor+networkpolicy", "ingress does not allow the metrics port",
+        ("gpu+components", "ingress does not allow the metrics port",
          lambda o: next(n for n in o if n["kind"] == "NetworkPolicy")["spec"]["ingress"][0]["ports"].pop()),
-        ("gpu+tls+servicemonitor+networkpolicy", "podSelector",
+        ("gpu+components", "podSelector",
          lambda o: next(n for n in o if n["kind"] == "NetworkPolicy")["spec"]["podSelector"]["matchLabels"].update(app="x")),
-        ("gpu+tls+servicemonitor+networkpolicy", "tcpSocket", lambda o: ctr(o)["readinessProbe"].update(grpc={"port": 50051})),
-        ("gpu+tls+servicemonitor+networkpolicy", "scrapes every pod twice", lambda o: dep(o)["spec"]["template"]["metadata"].setdefault("annotations", {}).update({"prometheus.io/scrape": "true"})),
-        ("gpu+tls+servicemonitor+networkpolicy", "has port", lambda o: next(s for s in o if s["kind"] == "ServiceMonitor")["spec"]["endpoints"][0].update(port="prom")),
+        ("gpu+components", "tcpSocket", lambda o: ctr(o)["readinessProbe"].update(grpc={"port": 50051})),
+        ("gpu+components", "scrapes every pod twice", lambda o: dep(o)["spec"]["template"]["metadata"].setdefault("annotations", {}).update({"prometheus.io/scrape": "true"})),
+        ("gpu+components", "has port", lambda o: next(s for s in o if s["kind"] == "ServiceMonitor")["spec"]["endpoints"][0].update(port="prom")),
     ]
 
 

@@ -108,6 +108,9 @@ pub enum Command {
     Loadtest(LoadtestArgs),
     /// Draw a frame's landing sites over its camera image and from above, as PNG.
     Render(RenderArgs),
+    /// Score landing sites against simulator ground truth in three segmentation modes (exit 7
+    /// when a gated mode returned an unsafe site).
+    Eval(crate::eval::cli::EvalArgs),
 }
 
 /// Pipeline options shared by the subcommands that send frames.
@@ -282,7 +285,10 @@ impl From<ClientError> for CliError {
     fn from(e: ClientError) -> Self {
         let code = if e.is_unreachable() {
             exit::UNREACHABLE
-        } else if matches!(e.code(), Some(tonic::Code::Unauthenticated | tonic::Code::PermissionDenied)) {
+        } else if matches!(
+            e.code(),
+            Some(tonic::Code::Unauthenticated | tonic::Code::PermissionDenied)
+        ) {
             exit::AUTH
         } else if matches!(e.code(), Some(tonic::Code::DeadlineExceeded)) {
             exit::UNREACHABLE
@@ -298,7 +304,10 @@ impl From<ClientError> for CliError {
 }
 
 fn usage(message: impl Into<String>) -> CliError {
-    CliError { code: exit::USAGE, message: message.into() }
+    CliError {
+        code: exit::USAGE,
+        message: message.into(),
+    }
 }
 
 /// Runs `landing` with `args` (the first is the program name), writing results to `out` and
@@ -346,6 +355,7 @@ pub async fn execute(cli: &Cli, out: &mut (dyn Write + Send)) -> Result<u8, CliE
         Command::Replay(a) => replay(cli, a, out).await,
         Command::Loadtest(a) => loadtest(cli, a, out).await,
         Command::Render(a) => render_cmd(cli, a, out).await,
+        Command::Eval(a) => crate::eval::cli::eval_cmd(&cli.connection, a, cli.json, out).await,
     }
 }
 
@@ -354,7 +364,10 @@ pub fn client_config(c: &ConnectionArgs) -> Result<ClientConfig, CliError> {
     let mut config = ClientConfig::new(c.server.clone());
     config.token = c.token.clone().filter(|t| !t.is_empty());
     if !(c.connect_timeout > 0.0 && c.connect_timeout.is_finite()) {
-        return Err(usage(format!("--connect-timeout {} must be positive", c.connect_timeout)));
+        return Err(usage(format!(
+            "--connect-timeout {} must be positive",
+            c.connect_timeout
+        )));
     }
     if !(c.timeout > 0.0 && c.timeout.is_finite()) {
         return Err(usage(format!("--timeout {} must be positive", c.timeout)));
@@ -362,7 +375,11 @@ pub fn client_config(c: &ConnectionArgs) -> Result<ClientConfig, CliError> {
     config.connect_timeout = Duration::from_secs_f64(c.connect_timeout);
     config.request_timeout = Some(Duration::from_secs_f64(c.timeout));
     if c.ca_cert.is_some() || c.client_cert.is_some() || c.server.starts_with("https://") {
-        let mut tls = TlsConfig::from_files(c.ca_cert.as_deref(), c.client_cert.as_deref(), c.client_key.as_deref())?;
+        let mut tls = TlsConfig::from_files(
+            c.ca_cert.as_deref(),
+            c.client_cert.as_deref(),
+            c.client_key.as_deref(),
+        )?;
         tls.domain_name = c.tls_domain.clone();
         config.tls = Some(tls);
     }
@@ -379,18 +396,25 @@ async fn connect(c: &ConnectionArgs) -> Result<LandingClient, CliError> {
 }
 
 fn io(e: std::io::Error) -> CliError {
-    CliError { code: exit::ERROR, message: format!("cannot write output: {e}") }
+    CliError {
+        code: exit::ERROR,
+        message: format!("cannot write output: {e}"),
+    }
 }
 
 fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
-    let is_ply = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    let is_ply = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if is_ply {
         let ply = crate::ply::read_ply(path)?;
         let mut builder = PointCloudBuilder::new(&ply.points).frame_id("world");
         if let Some(c) = &ply.classes {
             builder = builder.classes(c);
         }
-        return Ok(FrameBuilder::new(0, builder.build()?).drone_id("landing-cli").build());
+        return Ok(FrameBuilder::new(0, builder.build()?)
+            .drone_id("landing-cli")
+            .build());
     }
     let frames = read_frames(path)?;
     let n = frames.len();
@@ -398,15 +422,26 @@ fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
         .into_iter()
         .nth(index)
         .map(|f| f.frame)
-        .ok_or_else(|| usage(format!("--frame {index} is out of range: the recording has {n} frames")))
+        .ok_or_else(|| {
+            usage(format!(
+                "--frame {index} is out of range: the recording has {n} frames"
+            ))
+        })
 }
 
 async fn detect(cli: &Cli, a: &DetectArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
     let frame = load_frame(&a.input, a.frame)?;
     let client = connect(&cli.connection).await?;
-    let result = client.detect_with(frame, Some(a.pipeline.options())).await?;
+    let result = client
+        .detect_with(frame, Some(a.pipeline.options()))
+        .await?;
     if cli.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&result_json(&result)).unwrap_or_default()).map_err(io)?;
+        writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&result_json(&result)).unwrap_or_default()
+        )
+        .map_err(io)?;
     } else {
         print_result(&result, out).map_err(io)?;
     }
@@ -426,9 +461,12 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
     let client = connect(&cli.connection).await?;
     let mut mcap = a.out.as_deref().map(ResultWriter::create).transpose()?;
     let mut jsonl = match &a.jsonl {
-        Some(p) => Some(std::io::BufWriter::new(
-            std::fs::File::create(p).map_err(|e| ClientError::Io { path: p.display().to_string(), source: e })?,
-        )),
+        Some(p) => Some(std::io::BufWriter::new(std::fs::File::create(p).map_err(
+            |e| ClientError::Io {
+                path: p.display().to_string(),
+                source: e,
+            },
+        )?)),
         None => None,
     };
     let config = StreamConfig {
@@ -446,7 +484,8 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
             writeln!(w, "{}", item_json(item))?;
         }
         if let Some(w) = mcap.as_mut() {
-            w.write(rec.log_time_ns, &response_of(item)).map_err(std::io::Error::other)?;
+            w.write(rec.log_time_ns, &response_of(item))
+                .map_err(std::io::Error::other)?;
         }
         Ok(())
     })
@@ -466,7 +505,11 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         )
         .map_err(io)?;
     }
-    Ok(if failed > 0 { exit::FRAMES_FAILED } else { exit::OK })
+    Ok(if failed > 0 {
+        exit::FRAMES_FAILED
+    } else {
+        exit::OK
+    })
 }
 
 /// Counts of a replay.
@@ -527,13 +570,22 @@ where
     match send.await {
         Ok(Ok(())) => {}
         Ok(Err(e)) => return Err(e.into()),
-        Err(e) => return Err(CliError { code: exit::ERROR, message: format!("sender failed: {e}") }),
+        Err(e) => {
+            return Err(CliError {
+                code: exit::ERROR,
+                message: format!("sender failed: {e}"),
+            });
+        }
     }
     s.elapsed_s = started.elapsed().as_secs_f64();
     Ok(s)
 }
 
-async fn loadtest(cli: &Cli, a: &LoadtestArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+async fn loadtest(
+    cli: &Cli,
+    a: &LoadtestArgs,
+    out: &mut (dyn Write + Send),
+) -> Result<u8, CliError> {
     if !(a.duration > 0.0 && a.duration.is_finite()) {
         return Err(usage(format!("--duration {} must be positive", a.duration)));
     }
@@ -563,7 +615,10 @@ async fn loadtest(cli: &Cli, a: &LoadtestArgs, out: &mut (dyn Write + Send)) -> 
     let show = std::io::stderr().is_terminal();
     let progress = move |answered: u64, elapsed: Duration| {
         if show {
-            eprint!("\rloadtest: {answered} answers in {:.0} s", elapsed.as_secs_f64());
+            eprint!(
+                "\rloadtest: {answered} answers in {:.0} s",
+                elapsed.as_secs_f64()
+            );
         }
     };
     let report = run_load_test(&client, Arc::new(frames), &config, Some(&progress)).await?;
@@ -571,7 +626,12 @@ async fn loadtest(cli: &Cli, a: &LoadtestArgs, out: &mut (dyn Write + Send)) -> 
         eprintln!();
     }
     if cli.json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&report).unwrap_or_default()).map_err(io)?;
+        writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&report).unwrap_or_default()
+        )
+        .map_err(io)?;
     } else {
         print_load_report(&report, out).map_err(io)?;
     }
@@ -584,15 +644,31 @@ async fn loadtest(cli: &Cli, a: &LoadtestArgs, out: &mut (dyn Write + Send)) -> 
     })
 }
 
-async fn render_cmd(cli: &Cli, a: &RenderArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
+async fn render_cmd(
+    cli: &Cli,
+    a: &RenderArgs,
+    out: &mut (dyn Write + Send),
+) -> Result<u8, CliError> {
     let frame = load_frame(&a.recording, a.frame)?;
     let client = connect(&cli.connection).await?;
-    let result = client.detect_with(frame.clone(), Some(a.pipeline.options())).await?;
-    let rendered = render(&frame, &result, &RenderConfig { max_sites: a.sites, ..RenderConfig::default() })?;
-    rendered.image.save(&a.out).map_err(|e| ClientError::Image {
-        what: a.out.display().to_string(),
-        reason: e.to_string(),
-    })?;
+    let result = client
+        .detect_with(frame.clone(), Some(a.pipeline.options()))
+        .await?;
+    let rendered = render(
+        &frame,
+        &result,
+        &RenderConfig {
+            max_sites: a.sites,
+            ..RenderConfig::default()
+        },
+    )?;
+    rendered
+        .image
+        .save(&a.out)
+        .map_err(|e| ClientError::Image {
+            what: a.out.display().to_string(),
+            reason: e.to_string(),
+        })?;
     if cli.json {
         let v = json!({ "out": a.out.display().to_string(), "width": rendered.image.width(),
             "height": rendered.image.height(), "result": result_json(&result) });
@@ -615,9 +691,18 @@ async fn render_cmd(cli: &Cli, a: &RenderArgs, out: &mut (dyn Write + Send)) -> 
 // Output
 // ---------------------------------------------------------------------------------------------
 
-fn print_info(info: &ServiceInfo, as_json: bool, out: &mut (dyn Write + Send)) -> Result<(), CliError> {
+fn print_info(
+    info: &ServiceInfo,
+    as_json: bool,
+    out: &mut (dyn Write + Send),
+) -> Result<(), CliError> {
     if as_json {
-        writeln!(out, "{}", serde_json::to_string_pretty(&info_json(info)).unwrap_or_default()).map_err(io)?;
+        writeln!(
+            out,
+            "{}",
+            serde_json::to_string_pretty(&info_json(info)).unwrap_or_default()
+        )
+        .map_err(io)?;
         return Ok(());
     }
     let mut s = String::new();
@@ -625,7 +710,11 @@ fn print_info(info: &ServiceInfo, as_json: bool, out: &mut (dyn Write + Send)) -
     let _ = writeln!(s, "version            {}", info.version);
     match &info.model {
         Some(m) => {
-            let _ = writeln!(s, "model              {} ({}x{}, {})", m.name, m.input_width, m.input_height, m.execution_provider);
+            let _ = writeln!(
+                s,
+                "model              {} ({}x{}, {})",
+                m.name, m.input_width, m.input_height, m.execution_provider
+            );
             let _ = writeln!(s, "model sha256       {}", m.sha256);
         }
         None => {
@@ -653,13 +742,22 @@ fn options_pairs(o: &PipelineOptions) -> Vec<(&'static str, String)> {
         ("min_normal_dot", f(o.min_normal_dot)),
         ("max_triangle_height_m", f(o.max_triangle_height_m)),
         ("polylabel_precision_m", f(o.polylabel_precision_m)),
-        ("min_region_triangles", o.min_region_triangles.map_or("-".into(), |v| v.to_string())),
+        (
+            "min_region_triangles",
+            o.min_region_triangles.map_or("-".into(), |v| v.to_string()),
+        ),
         ("min_safe_radius_m", f(o.min_safe_radius_m)),
         ("min_area_m2", f(o.min_area_m2)),
         ("min_hole_area_m2", f(o.min_hole_area_m2)),
-        ("max_sites", o.max_sites.map_or("-".into(), |v| v.to_string())),
+        (
+            "max_sites",
+            o.max_sites.map_or("-".into(), |v| v.to_string()),
+        ),
         ("landable_classes", format!("{:?}", o.landable_classes)),
-        ("segmentation_mode", segmentation_name(o.segmentation_mode).to_owned()),
+        (
+            "segmentation_mode",
+            segmentation_name(o.segmentation_mode).to_owned(),
+        ),
     ]
 }
 
@@ -688,22 +786,35 @@ fn info_json(info: &ServiceInfo) -> Value {
 }
 
 fn print_result(r: &FrameResult, out: &mut (dyn Write + Send)) -> std::io::Result<()> {
-    let total = r.timings.and_then(|t| t.total).and_then(duration_from_proto);
+    let total = r
+        .timings
+        .and_then(|t| t.total)
+        .and_then(duration_from_proto);
     writeln!(
         out,
         "frame {} ({}): {} points, {} triangles, segmentation {}, {} site(s){}",
         r.sequence,
-        if r.drone_id.is_empty() { "-" } else { &r.drone_id },
+        if r.drone_id.is_empty() {
+            "-"
+        } else {
+            &r.drone_id
+        },
         r.point_count,
         r.triangle_count,
         segmentation_name(r.segmentation_mode),
         r.sites.len(),
-        total.map(|t| format!(", {:.1} ms", t.as_secs_f64() * 1e3)).unwrap_or_default()
+        total
+            .map(|t| format!(", {:.1} ms", t.as_secs_f64() * 1e3))
+            .unwrap_or_default()
     )?;
     if r.sites.is_empty() {
         return Ok(());
     }
-    writeln!(out, "{:>4}  {:>9}  {:>9}  {:>28}  {:>6}  {:>6}", "rank", "radius_m", "area_m2", "centre (x, y, z)", "holes", "points")?;
+    writeln!(
+        out,
+        "{:>4}  {:>9}  {:>9}  {:>28}  {:>6}  {:>6}",
+        "rank", "radius_m", "area_m2", "centre (x, y, z)", "holes", "points"
+    )?;
     for s in &r.sites {
         writeln!(out, "{}", site_row(s))?;
     }
@@ -727,32 +838,46 @@ fn print_item_row(item: &StreamItem, out: &mut (dyn Write + Send)) -> std::io::R
     let ms = item.latency.as_secs_f64() * 1e3;
     match &item.outcome {
         FrameOutcome::Result(r) => {
-            let best = r.sites.first();
             writeln!(
                 out,
-                "frame {:>5}  ok       {:>2} site(s)  best r={:<6} at {:<26} {:>7.1} ms",
+                "frame {:>5}  ok       {:>2} site(s)  {:>7.1} ms",
                 item.sequence,
                 r.sites.len(),
-                best.map_or("-".into(), |s| format!("{:.2}", s.safe_radius_m)),
-                best.and_then(|s| s.center).map_or("-".into(), |c| format!("({:.2}, {:.2}, {:.2})", c.x, c.y, c.z)),
                 ms
-            )
+            )?;
+            for s in &r.sites {
+                writeln!(out, "      {}", site_row(s))?;
+            }
+            Ok(())
         }
         FrameOutcome::Error(e) => writeln!(out, "frame {:>5}  error    {e}", item.sequence),
         FrameOutcome::Skipped { superseded_by } => {
-            writeln!(out, "frame {:>5}  skipped  (superseded by {superseded_by})", item.sequence)
+            writeln!(
+                out,
+                "frame {:>5}  skipped  (superseded by {superseded_by})",
+                item.sequence
+            )
         }
     }
 }
 
 fn print_load_report(r: &LoadTestReport, out: &mut (dyn Write + Send)) -> std::io::Result<()> {
     writeln!(out, "streams            {}", r.streams)?;
-    writeln!(out, "rate per stream    {}", r.rate_hz_per_stream.map_or("max".into(), |v| format!("{v} Hz")))?;
+    writeln!(
+        out,
+        "rate per stream    {}",
+        r.rate_hz_per_stream
+            .map_or("max".into(), |v| format!("{v} Hz"))
+    )?;
     writeln!(out, "elapsed            {:.2} s", r.elapsed_s)?;
     writeln!(out, "sent / answered    {} / {}", r.sent, r.answered)?;
     writeln!(out, "throughput         {:.2} frames/s", r.throughput_fps)?;
     let p = r.latency_ms;
-    writeln!(out, "latency (ok)       p50 {:.1} ms  p95 {:.1} ms  p99 {:.1} ms  max {:.1} ms", p.p50, p.p95, p.p99, p.max)?;
+    writeln!(
+        out,
+        "latency (ok)       p50 {:.1} ms  p95 {:.1} ms  p99 {:.1} ms  max {:.1} ms",
+        p.p50, p.p95, p.p99, p.max
+    )?;
     writeln!(out, "mean sites/frame   {:.2}", r.mean_sites)?;
     let outcomes: Vec<String> = r.outcomes.iter().map(|(k, v)| format!("{k} {v}")).collect();
     writeln!(out, "outcomes           {}", outcomes.join(", "))?;
@@ -771,7 +896,10 @@ fn print_load_report(r: &LoadTestReport, out: &mut (dyn Write + Send)) -> std::i
 
 /// The JSON form of a frame result (used by `--json` and JSON lines).
 pub fn result_json(r: &FrameResult) -> Value {
-    let ms = |d: Option<prost_types::Duration>| d.and_then(duration_from_proto).map(|d| d.as_secs_f64() * 1e3);
+    let ms = |d: Option<prost_types::Duration>| {
+        d.and_then(duration_from_proto)
+            .map(|d| d.as_secs_f64() * 1e3)
+    };
     let t = r.timings.unwrap_or_default();
     json!({
         "drone_id": r.drone_id,
@@ -791,7 +919,12 @@ pub fn result_json(r: &FrameResult) -> Value {
 
 fn site_json(s: &LandingSite) -> Value {
     let v3 = |v: Option<landing_proto::v1::Vector3>| v.map(|v| json!([v.x, v.y, v.z]));
-    let ring = |r: &landing_proto::v1::LinearRing| r.points.iter().map(|p| json!([p.x, p.y, p.z])).collect::<Vec<_>>();
+    let ring = |r: &landing_proto::v1::LinearRing| {
+        r.points
+            .iter()
+            .map(|p| json!([p.x, p.y, p.z]))
+            .collect::<Vec<_>>()
+    };
     json!({
         "rank": s.rank,
         "safe_radius_m": s.safe_radius_m,
@@ -830,7 +963,9 @@ fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
     let outcome = match &item.outcome {
         FrameOutcome::Result(r) => Outcome::Result(r.clone()),
         FrameOutcome::Skipped { superseded_by } => {
-            Outcome::Skipped(landing_proto::v1::FrameSkipped { superseded_by_sequence: *superseded_by })
+            Outcome::Skipped(landing_proto::v1::FrameSkipped {
+                superseded_by_sequence: *superseded_by,
+            })
         }
         FrameOutcome::Error(e) => Outcome::Error(landing_proto::google::rpc::Status {
             code: e.code as i32,
@@ -838,7 +973,10 @@ fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
             details: Vec::new(),
         }),
     };
-    StreamLandingSitesResponse { sequence: item.sequence, outcome: Some(outcome) }
+    StreamLandingSitesResponse {
+        sequence: item.sequence,
+        outcome: Some(outcome),
+    }
 }
 
 #[cfg(test)]
@@ -866,19 +1004,38 @@ mod tests {
         assert_eq!(run_capture(&["landing", "frobnicate"]).await.0, exit::USAGE);
         assert_eq!(run_capture(&["landing", "loadtest"]).await.0, exit::USAGE);
         assert_eq!(
-            run_capture(&["landing", "info", "--client-cert", "/x.pem"]).await.0,
+            run_capture(&["landing", "info", "--client-cert", "/x.pem"])
+                .await
+                .0,
             exit::USAGE,
             "a client cert without its key"
         );
-        assert_eq!(run_capture(&["landing", "info", "--server", "ftp://x"]).await.0, exit::USAGE);
+        assert_eq!(
+            run_capture(&["landing", "info", "--server", "ftp://x"])
+                .await
+                .0,
+            exit::USAGE
+        );
     }
 
     #[tokio::test]
     async fn nothing_listening_is_exit_3() {
         // Bind and drop to find a port with nothing behind it.
-        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
         let server = format!("http://127.0.0.1:{port}");
-        let (code, _) = run_capture(&["landing", "info", "--server", &server, "--connect-timeout", "2"]).await;
+        let (code, _) = run_capture(&[
+            "landing",
+            "info",
+            "--server",
+            &server,
+            "--connect-timeout",
+            "2",
+        ])
+        .await;
         assert_eq!(code, exit::UNREACHABLE);
     }
 
@@ -891,10 +1048,20 @@ mod tests {
     #[test]
     fn pipeline_flags_become_options() {
         let cli = Cli::try_parse_from([
-            "landing", "detect", "x.ply", "--segmentation", "point-classes", "--max-triangle-edge", "3.5", "--max-sites", "2",
+            "landing",
+            "detect",
+            "x.ply",
+            "--segmentation",
+            "point-classes",
+            "--max-triangle-edge",
+            "3.5",
+            "--max-sites",
+            "2",
         ])
         .unwrap();
-        let Command::Detect(a) = cli.command else { panic!("not detect") };
+        let Command::Detect(a) = cli.command else {
+            panic!("not detect")
+        };
         let o = a.pipeline.options();
         assert_eq!(o.segmentation_mode, SegmentationMode::PointClasses as i32);
         assert_eq!(o.max_triangle_edge_m, Some(3.5));
@@ -909,15 +1076,23 @@ mod tests {
             outcome: FrameOutcome::Error(crate::FrameError {
                 code: tonic::Code::InvalidArgument,
                 message: "bad".into(),
-                field_violations: vec![crate::FieldViolation { field: "frame.point_cloud".into(), description: "missing".into() }],
+                field_violations: vec![crate::FieldViolation {
+                    field: "frame.point_cloud".into(),
+                    description: "missing".into(),
+                }],
                 retry_delay: None,
             }),
             latency: Duration::from_millis(2),
         };
         let v = item_json(&item);
         assert_eq!(v["outcome"], "invalid_argument");
-        assert_eq!(v["error"]["field_violations"][0]["field"], "frame.point_cloud");
+        assert_eq!(
+            v["error"]["field_violations"][0]["field"],
+            "frame.point_cloud"
+        );
         let r = response_of(&item);
-        assert!(matches!(r.outcome, Some(stream_landing_sites_response::Outcome::Error(ref s)) if s.code == 3));
+        assert!(
+            matches!(r.outcome, Some(stream_landing_sites_response::Outcome::Error(ref s)) if s.code == 3)
+        );
     }
 }

@@ -33,7 +33,10 @@ pub struct Auth {
 }
 
 impl Interceptor for Auth {
-    fn call(&mut self, mut request: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
         if let Some(h) = &self.header {
             request.metadata_mut().insert("authorization", h.clone());
         }
@@ -54,10 +57,13 @@ impl LandingClient {
     /// as [`ClientError::Unreachable`].
     pub async fn connect(config: ClientConfig) -> Result<Self, ClientError> {
         let endpoint = endpoint(&config)?;
-        let channel = endpoint.connect().await.map_err(|e| ClientError::Unreachable {
-            endpoint: config.endpoint.clone(),
-            reason: error_chain(&e),
-        })?;
+        let channel = endpoint
+            .connect()
+            .await
+            .map_err(|e| ClientError::Unreachable {
+                endpoint: config.endpoint.clone(),
+                reason: error_chain(&e),
+            })?;
         Self::from_channel(channel, config)
     }
 
@@ -78,7 +84,11 @@ impl LandingClient {
             .max_decoding_message_size(config.max_response_bytes)
             .max_encoding_message_size(usize::MAX);
         let health = HealthClient::with_interceptor(channel, auth);
-        Ok(Self { landing, health, config: Arc::new(config) })
+        Ok(Self {
+            landing,
+            health,
+            config: Arc::new(config),
+        })
     }
 
     /// The configuration this client was made with.
@@ -98,7 +108,10 @@ impl LandingClient {
         frame: Frame,
         options: Option<PipelineOptions>,
     ) -> Result<FrameResult, ClientError> {
-        let request = DetectLandingSitesRequest { frame: Some(frame), options };
+        let request = DetectLandingSitesRequest {
+            frame: Some(frame),
+            options,
+        };
         let response = self
             .with_retries(|mut client, timeout| {
                 let mut req = tonic::Request::new(request.clone());
@@ -128,8 +141,9 @@ impl LandingClient {
     /// The `grpc.health.v1` status of `service` (`""` for the whole server).
     pub async fn health(&self, service: &str) -> Result<ServingStatus, ClientError> {
         let mut client = self.health.clone();
-        let mut req =
-            tonic::Request::new(tonic_health::pb::HealthCheckRequest { service: service.to_owned() });
+        let mut req = tonic::Request::new(tonic_health::pb::HealthCheckRequest {
+            service: service.to_owned(),
+        });
         if let Some(t) = self.config.request_timeout {
             req.set_timeout(t);
         }
@@ -149,10 +163,14 @@ impl LandingClient {
     pub fn open_stream(&self, config: StreamConfig) -> (FrameSender, ResultStream) {
         let (tx, rx) = mpsc::channel::<StreamLandingSitesRequest>(1);
         let pending = Arc::new(Mutex::new(VecDeque::new()));
-        let window = Arc::new(Semaphore::new(config.max_in_flight.clamp(1, Semaphore::MAX_PERMITS)));
+        let window = Arc::new(Semaphore::new(
+            config.max_in_flight.clamp(1, Semaphore::MAX_PERMITS),
+        ));
         let mut client = self.landing.clone();
         let call = tokio::spawn(async move {
-            client.stream_landing_sites(tokio_stream::wrappers::ReceiverStream::new(rx)).await
+            client
+                .stream_landing_sites(tokio_stream::wrappers::ReceiverStream::new(rx))
+                .await
         });
         let sender = FrameSender {
             tx,
@@ -232,9 +250,14 @@ impl LandingClient {
 fn status_to_error(endpoint: &str, status: &tonic::Status) -> ClientError {
     use std::error::Error;
     if status.code() == tonic::Code::Unavailable
-        && status.source().is_some_and(|s| s.downcast_ref::<tonic::transport::Error>().is_some())
+        && status
+            .source()
+            .is_some_and(|s| s.downcast_ref::<tonic::transport::Error>().is_some())
     {
-        return ClientError::Unreachable { endpoint: endpoint.to_owned(), reason: error_chain(status) };
+        return ClientError::Unreachable {
+            endpoint: endpoint.to_owned(),
+            reason: error_chain(status),
+        };
     }
     ClientError::Status(Box::new(FrameError::from_status(status)))
 }
@@ -289,7 +312,9 @@ fn endpoint(config: &ClientConfig) -> Result<Endpoint, ClientError> {
                     return Err(ClientError::InvalidConfig {
                         field: "ca_cert",
                         value: String::new(),
-                        reason: "an https:// endpoint needs the CA certificate that signed the server's".into(),
+                        reason:
+                            "an https:// endpoint needs the CA certificate that signed the server's"
+                                .into(),
                     });
                 }
             }
@@ -313,11 +338,14 @@ fn endpoint(config: &ClientConfig) -> Result<Endpoint, ClientError> {
             return Err(ClientError::InvalidConfig {
                 field: "ca_cert",
                 value: String::new(),
-                reason: "an https:// endpoint needs the CA certificate that signed the server's".into(),
+                reason: "an https:// endpoint needs the CA certificate that signed the server's"
+                    .into(),
             });
         }
         (Some(_), false) => {
-            return Err(bad("TLS settings were given for a plain http:// endpoint; use https://".into()));
+            return Err(bad(
+                "TLS settings were given for a plain http:// endpoint; use https://".into(),
+            ));
         }
         (None, false) => {}
     }
@@ -337,7 +365,11 @@ pub struct StreamConfig {
 
 impl Default for StreamConfig {
     fn default() -> Self {
-        Self { overflow_policy: OverflowPolicy::Block, options: None, max_in_flight: 16 }
+        Self {
+            overflow_policy: OverflowPolicy::Block,
+            options: None,
+            max_in_flight: 16,
+        }
     }
 }
 
@@ -370,8 +402,16 @@ impl FrameSender {
     ) -> Result<(), ClientError> {
         let seq = frame.sequence;
         // Both waits are cancel-safe: nothing is recorded until the frame is handed over.
-        let permit = self.window.acquire().await.map_err(|_| ClientError::StreamClosed(seq))?;
-        let slot = self.tx.reserve().await.map_err(|_| ClientError::StreamClosed(seq))?;
+        let permit = self
+            .window
+            .acquire()
+            .await
+            .map_err(|_| ClientError::StreamClosed(seq))?;
+        let slot = self
+            .tx
+            .reserve()
+            .await
+            .map_err(|_| ClientError::StreamClosed(seq))?;
         {
             let mut pending = self.pending.lock().unwrap_or_else(|e| e.into_inner());
             if pending.iter().any(|(s, _)| *s == seq) {
@@ -380,9 +420,17 @@ impl FrameSender {
             pending.push_back((seq, Instant::now()));
         }
         permit.forget();
-        let overflow_policy = if self.first { self.config.overflow_policy as i32 } else { 0 };
+        let overflow_policy = if self.first {
+            self.config.overflow_policy as i32
+        } else {
+            0
+        };
         self.first = false;
-        slot.send(StreamLandingSitesRequest { frame: Some(frame), options, overflow_policy });
+        slot.send(StreamLandingSitesRequest {
+            frame: Some(frame),
+            options,
+            overflow_policy,
+        });
         Ok(())
     }
 
@@ -396,7 +444,11 @@ impl FrameSender {
 }
 
 enum StreamState {
-    Opening(tokio::task::JoinHandle<Result<tonic::Response<tonic::Streaming<StreamLandingSitesResponse>>, tonic::Status>>),
+    Opening(
+        tokio::task::JoinHandle<
+            Result<tonic::Response<tonic::Streaming<StreamLandingSitesResponse>>, tonic::Status>,
+        >,
+    ),
     Open(Box<tonic::Streaming<StreamLandingSitesResponse>>),
     Done,
 }
@@ -413,7 +465,9 @@ pub struct ResultStream {
 
 impl std::fmt::Debug for ResultStream {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ResultStream").field("endpoint", &self.endpoint).finish_non_exhaustive()
+        f.debug_struct("ResultStream")
+            .field("endpoint", &self.endpoint)
+            .finish_non_exhaustive()
     }
 }
 
@@ -423,7 +477,10 @@ impl ResultStream {
         std::future::poll_fn(|cx| Pin::new(&mut *self).poll_next(cx)).await
     }
 
-    fn broken(&mut self, status: Option<&tonic::Status>) -> Option<Result<StreamItem, ClientError>> {
+    fn broken(
+        &mut self,
+        status: Option<&tonic::Status>,
+    ) -> Option<Result<StreamItem, ClientError>> {
         self.state = StreamState::Done;
         self.window.close();
         let unanswered: Vec<u64> = self
@@ -435,7 +492,10 @@ impl ResultStream {
             .collect();
         match status {
             None if unanswered.is_empty() => None,
-            None => Some(Err(ClientError::StreamBroken { unanswered, status: None })),
+            None => Some(Err(ClientError::StreamBroken {
+                unanswered,
+                status: None,
+            })),
             Some(s) => {
                 let e = status_to_error(&self.endpoint, s);
                 match e {
@@ -464,7 +524,11 @@ impl ResultStream {
             )));
         };
         self.window.add_permits(1);
-        Ok(StreamItem { sequence, outcome, latency: sent.elapsed() })
+        Ok(StreamItem {
+            sequence,
+            outcome,
+            latency: sent.elapsed(),
+        })
     }
 }
 

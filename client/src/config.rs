@@ -44,7 +44,10 @@ impl Default for ClientConfig {
 impl ClientConfig {
     /// The default configuration for this endpoint.
     pub fn new(endpoint: impl Into<String>) -> Self {
-        Self { endpoint: endpoint.into(), ..Self::default() }
+        Self {
+            endpoint: endpoint.into(),
+            ..Self::default()
+        }
     }
 
     /// Sets the bearer token.
@@ -81,7 +84,8 @@ impl TlsConfig {
         client_key: Option<&Path>,
     ) -> Result<Self, ClientError> {
         let read = |p: Option<&Path>| -> Result<Option<Vec<u8>>, ClientError> {
-            p.map(|p| std::fs::read(p).map_err(|e| ClientError::io(p, e))).transpose()
+            p.map(|p| std::fs::read(p).map_err(|e| ClientError::io(p, e)))
+                .transpose()
         };
         Ok(Self {
             ca_cert_pem: read(ca_cert)?,
@@ -121,12 +125,18 @@ impl Default for RetryPolicy {
 impl RetryPolicy {
     /// No retries.
     pub fn none() -> Self {
-        Self { max_attempts: 1, ..Self::default() }
+        Self {
+            max_attempts: 1,
+            ..Self::default()
+        }
     }
 
     /// Whether a call that failed with `code` may be sent again.
     pub fn is_retryable(code: tonic::Code) -> bool {
-        matches!(code, tonic::Code::Unavailable | tonic::Code::ResourceExhausted)
+        matches!(
+            code,
+            tonic::Code::Unavailable | tonic::Code::ResourceExhausted
+        )
     }
 
     /// The wait before attempt `attempt + 1` (attempt counts from 1), given the server's request.
@@ -136,7 +146,10 @@ impl RetryPolicy {
         if let Some(d) = server_delay {
             return d.min(self.max_backoff);
         }
-        let exp = self.multiplier.max(1.0).powi(attempt.saturating_sub(1).min(64) as i32);
+        let exp = self
+            .multiplier
+            .max(1.0)
+            .powi(attempt.saturating_sub(1).min(64) as i32);
         let full = self.initial_backoff.as_secs_f64() * exp;
         let capped = full.min(self.max_backoff.as_secs_f64());
         Duration::from_secs_f64(capped * (1.0 - 0.5 * jitter.clamp(0.0, 1.0)))
@@ -160,8 +173,14 @@ mod tests {
     #[test]
     fn server_delay_wins_but_is_capped() {
         let p = RetryPolicy::default();
-        assert_eq!(p.backoff(1, Some(Duration::from_millis(700)), 0.3), Duration::from_millis(700));
-        assert_eq!(p.backoff(1, Some(Duration::from_secs(600)), 0.0), Duration::from_secs(5));
+        assert_eq!(
+            p.backoff(1, Some(Duration::from_millis(700)), 0.3),
+            Duration::from_millis(700)
+        );
+        assert_eq!(
+            p.backoff(1, Some(Duration::from_secs(600)), 0.0),
+            Duration::from_secs(5)
+        );
     }
 
     #[test]
@@ -175,7 +194,8 @@ mod tests {
 
     #[test]
     fn missing_certificate_file_names_the_path() {
-        let err = TlsConfig::from_files(Some(Path::new("/nonexistent/ca.pem")), None, None).unwrap_err();
+        let err =
+            TlsConfig::from_files(Some(Path::new("/nonexistent/ca.pem")), None, None).unwrap_err();
         assert!(err.to_string().contains("/nonexistent/ca.pem"), "{err}");
     }
 }

@@ -8,7 +8,11 @@ use std::time::Duration;
 pub enum ClientError {
     /// A configuration value is unusable (bad URL, unreadable certificate, ...).
     #[error("invalid client configuration `{field}` = {value:?}: {reason}")]
-    InvalidConfig { field: &'static str, value: String, reason: String },
+    InvalidConfig {
+        field: &'static str,
+        value: String,
+        reason: String,
+    },
     /// Reading a file (certificate, recording, PLY, image) failed.
     #[error("cannot read `{path}`: {source}")]
     Io {
@@ -24,13 +28,20 @@ pub enum ClientError {
     Status(Box<crate::FrameError>),
     /// Retries ran out; the last status is attached.
     #[error("gave up after {attempts} attempts over {elapsed:?}; last answer {}: {}", .last.code, .last.message)]
-    RetriesExhausted { attempts: u32, elapsed: Duration, last: Box<crate::FrameError> },
+    RetriesExhausted {
+        attempts: u32,
+        elapsed: Duration,
+        last: Box<crate::FrameError>,
+    },
     /// A builder was given inconsistent input.
     #[error("invalid frame input `{field}`: {reason}")]
     InvalidInput { field: &'static str, reason: String },
     /// A stream ended (or broke) while frames were still unanswered.
     #[error("stream ended with {} frame(s) unanswered (first: {:?}){}", .unanswered.len(), .unanswered.first(), .status.as_ref().map(|s| format!("; server status {}: {}", s.code, s.message)).unwrap_or_default())]
-    StreamBroken { unanswered: Vec<u64>, status: Option<Box<crate::FrameError>> },
+    StreamBroken {
+        unanswered: Vec<u64>,
+        status: Option<Box<crate::FrameError>>,
+    },
     /// The server broke the stream contract (an answer for a frame not sent, ...).
     #[error("protocol violation: {0}")]
     Protocol(String),
@@ -50,7 +61,10 @@ pub enum ClientError {
 
 impl ClientError {
     pub(crate) fn io(path: impl AsRef<std::path::Path>, source: std::io::Error) -> Self {
-        Self::Io { path: path.as_ref().display().to_string(), source }
+        Self::Io {
+            path: path.as_ref().display().to_string(),
+            source,
+        }
     }
 
     /// The gRPC code behind this error, when the server answered one.
@@ -58,7 +72,9 @@ impl ClientError {
         match self {
             Self::Status(e) => Some(e.code),
             Self::RetriesExhausted { last, .. } => Some(last.code),
-            Self::StreamBroken { status: Some(s), .. } => Some(s.code),
+            Self::StreamBroken {
+                status: Some(s), ..
+            } => Some(s.code),
             _ => None,
         }
     }

@@ -25,7 +25,10 @@ pub struct PointCloudBuilder<'a> {
 impl<'a> PointCloudBuilder<'a> {
     /// Starts a cloud of `points` (in the LiDAR frame, or in the world when no pose is set).
     pub fn new(points: &'a [[f32; 3]]) -> Self {
-        Self { points, ..Default::default() }
+        Self {
+            points,
+            ..Default::default()
+        }
     }
 
     /// Per-point classes (values of `SemanticClass`, 0 = unknown); one per point.
@@ -115,7 +118,11 @@ impl<'a> PointCloudBuilder<'a> {
 }
 
 fn field(name: &str, offset: u32, ty: NumericType) -> PackedElementField {
-    PackedElementField { name: name.to_owned(), offset, r#type: ty as i32 }
+    PackedElementField {
+        name: name.to_owned(),
+        offset,
+        r#type: ty as i32,
+    }
 }
 
 /// A point cloud unpacked from its wire form.
@@ -152,7 +159,10 @@ pub fn unpack_point_cloud(cloud: &PointCloud) -> Result<UnpackedCloud, ClientErr
     if !cloud.data.len().is_multiple_of(stride) {
         return Err(ClientError::InvalidInput {
             field: "point_cloud.data",
-            reason: format!("{} bytes is not a multiple of the stride {stride}", cloud.data.len()),
+            reason: format!(
+                "{} bytes is not a multiple of the stride {stride}",
+                cloud.data.len()
+            ),
         });
     }
     let find = |name: &str| cloud.fields.iter().find(|f| f.name == name);
@@ -211,7 +221,11 @@ pub fn unpack_point_cloud(cloud: &PointCloud) -> Result<UnpackedCloud, ClientErr
 pub fn pose(position: [f64; 3], orientation_xyzw: [f64; 4]) -> Pose {
     let [x, y, z, w] = orientation_xyzw;
     Pose {
-        position: Some(Vector3 { x: position[0], y: position[1], z: position[2] }),
+        position: Some(Vector3 {
+            x: position[0],
+            y: position[1],
+            z: position[2],
+        }),
         orientation: Some(Quaternion { x, y, z, w }),
     }
 }
@@ -222,8 +236,22 @@ pub fn identity_pose() -> Pose {
 }
 
 /// Pinhole intrinsics.
-pub fn intrinsics(width: u32, height: u32, fx: f64, fy: f64, cx: f64, cy: f64) -> CameraCalibration {
-    CameraCalibration { width, height, fx, fy, cx, cy }
+pub fn intrinsics(
+    width: u32,
+    height: u32,
+    fx: f64,
+    fy: f64,
+    cx: f64,
+    cy: f64,
+) -> CameraCalibration {
+    CameraCalibration {
+        width,
+        height,
+        fx,
+        fy,
+        cx,
+        cy,
+    }
 }
 
 /// Pinhole intrinsics of an ideal camera with square pixels, the principal point at the image
@@ -241,7 +269,11 @@ pub enum ImageData {
     /// An encoded JPEG file.
     Jpeg(Vec<u8>),
     /// Raw 8-bit RGB, row-major, tightly packed (`width * 3` bytes per row).
-    Rgb8 { width: u32, height: u32, data: Vec<u8> },
+    Rgb8 {
+        width: u32,
+        height: u32,
+        data: Vec<u8>,
+    },
 }
 
 /// Ties pixels to the camera's pose and intrinsics. The image size is checked against the
@@ -254,18 +286,31 @@ pub fn camera_image(
     let (size, image) = match pixels {
         ImageData::Png(data) => (
             probe_size(&data, image::ImageFormat::Png)?,
-            camera_image::Image::Compressed(CompressedImage { data, format: "png".into() }),
+            camera_image::Image::Compressed(CompressedImage {
+                data,
+                format: "png".into(),
+            }),
         ),
         ImageData::Jpeg(data) => (
             probe_size(&data, image::ImageFormat::Jpeg)?,
-            camera_image::Image::Compressed(CompressedImage { data, format: "jpeg".into() }),
+            camera_image::Image::Compressed(CompressedImage {
+                data,
+                format: "jpeg".into(),
+            }),
         ),
-        ImageData::Rgb8 { width, height, data } => {
+        ImageData::Rgb8 {
+            width,
+            height,
+            data,
+        } => {
             let expected = width as usize * height as usize * 3;
             if data.len() != expected {
                 return Err(ClientError::InvalidInput {
                     field: "image.data",
-                    reason: format!("{} bytes for a {width}x{height} RGB8 image (expected {expected})", data.len()),
+                    reason: format!(
+                        "{} bytes for a {width}x{height} RGB8 image (expected {expected})",
+                        data.len()
+                    ),
                 });
             }
             (
@@ -301,7 +346,10 @@ pub fn camera_image(
 fn probe_size(data: &[u8], format: image::ImageFormat) -> Result<(u32, u32), ClientError> {
     image::ImageReader::with_format(std::io::Cursor::new(data), format)
         .into_dimensions()
-        .map_err(|e| ClientError::Image { what: format!("{format:?}"), reason: e.to_string() })
+        .map_err(|e| ClientError::Image {
+            what: format!("{format:?}"),
+            reason: e.to_string(),
+        })
 }
 
 /// Builds a [`Frame`] around a cloud.
@@ -313,7 +361,13 @@ pub struct FrameBuilder {
 impl FrameBuilder {
     /// A frame with this sequence number and LiDAR scan.
     pub fn new(sequence: u64, point_cloud: PointCloud) -> Self {
-        Self { frame: Frame { sequence, point_cloud: Some(point_cloud), ..Default::default() } }
+        Self {
+            frame: Frame {
+                sequence,
+                point_cloud: Some(point_cloud),
+                ..Default::default()
+            },
+        }
     }
 
     /// The drone that took the frame.
@@ -335,8 +389,17 @@ impl FrameBuilder {
     }
 
     /// WGS-84 position of the world origin, so sites also carry latitude/longitude.
-    pub fn geodetic_origin(mut self, latitude_deg: f64, longitude_deg: f64, altitude_m: f64) -> Self {
-        self.frame.geodetic_origin = Some(GeodeticPoint { latitude_deg, longitude_deg, altitude_m });
+    pub fn geodetic_origin(
+        mut self,
+        latitude_deg: f64,
+        longitude_deg: f64,
+        altitude_m: f64,
+    ) -> Self {
+        self.frame.geodetic_origin = Some(GeodeticPoint {
+            latitude_deg,
+            longitude_deg,
+            altitude_m,
+        });
         self
     }
 
@@ -357,22 +420,36 @@ pub struct RigidTransform {
 
 impl Default for RigidTransform {
     fn default() -> Self {
-        Self { rotation: [0.0, 0.0, 0.0, 1.0], translation: [0.0; 3] }
+        Self {
+            rotation: [0.0, 0.0, 0.0, 1.0],
+            translation: [0.0; 3],
+        }
     }
 }
 
 impl RigidTransform {
     /// From a proto pose; a missing or zero quaternion is taken as identity.
     pub fn from_pose(pose: &Pose) -> Self {
-        let t = pose.position.as_ref().map(|p| [p.x, p.y, p.z]).unwrap_or([0.0; 3]);
-        let q = pose.orientation.as_ref().map(|q| [q.x, q.y, q.z, q.w]).unwrap_or([0.0, 0.0, 0.0, 1.0]);
+        let t = pose
+            .position
+            .as_ref()
+            .map(|p| [p.x, p.y, p.z])
+            .unwrap_or([0.0; 3]);
+        let q = pose
+            .orientation
+            .as_ref()
+            .map(|q| [q.x, q.y, q.z, q.w])
+            .unwrap_or([0.0, 0.0, 0.0, 1.0]);
         let n = q.iter().map(|c| c * c).sum::<f64>().sqrt();
         let rotation = if n > 0.0 && n.is_finite() {
             [q[0] / n, q[1] / n, q[2] / n, q[3] / n]
         } else {
             [0.0, 0.0, 0.0, 1.0]
         };
-        Self { rotation, translation: t }
+        Self {
+            rotation,
+            translation: t,
+        }
     }
 
     /// Rotates a vector (no translation).
@@ -391,20 +468,34 @@ impl RigidTransform {
     /// Maps a point from the child frame to the parent frame.
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
         let r = self.rotate(p);
-        [r[0] + self.translation[0], r[1] + self.translation[1], r[2] + self.translation[2]]
+        [
+            r[0] + self.translation[0],
+            r[1] + self.translation[1],
+            r[2] + self.translation[2],
+        ]
     }
 
     /// The inverse transform.
     pub fn inverse(&self) -> Self {
         let [x, y, z, w] = self.rotation;
-        let inv = Self { rotation: [-x, -y, -z, w], translation: [0.0; 3] };
+        let inv = Self {
+            rotation: [-x, -y, -z, w],
+            translation: [0.0; 3],
+        };
         let t = inv.rotate(self.translation);
-        Self { rotation: inv.rotation, translation: [-t[0], -t[1], -t[2]] }
+        Self {
+            rotation: inv.rotation,
+            translation: [-t[0], -t[1], -t[2]],
+        }
     }
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 #[cfg(test)]
@@ -433,7 +524,10 @@ mod tests {
     #[test]
     fn rejects_class_count_mismatch_naming_the_field() {
         let pts = [[0.0f32; 3]; 3];
-        let err = PointCloudBuilder::new(&pts).classes(&[1, 2]).build().unwrap_err();
+        let err = PointCloudBuilder::new(&pts)
+            .classes(&[1, 2])
+            .build()
+            .unwrap_err();
         assert!(err.to_string().contains("`classes`"), "{err}");
         assert!(err.to_string().contains("2 classes for 3 points"), "{err}");
     }
@@ -464,33 +558,53 @@ mod tests {
         let calib = intrinsics_from_fov(4, 2, 90.0);
         assert!((calib.fx - 2.0).abs() < 1e-9);
         let ok = camera_image(
-            ImageData::Rgb8 { width: 4, height: 2, data: vec![0; 24] },
+            ImageData::Rgb8 {
+                width: 4,
+                height: 2,
+                data: vec![0; 24],
+            },
             identity_pose(),
             calib,
         );
         assert!(ok.is_ok());
         let short = camera_image(
-            ImageData::Rgb8 { width: 4, height: 2, data: vec![0; 23] },
+            ImageData::Rgb8 {
+                width: 4,
+                height: 2,
+                data: vec![0; 23],
+            },
             identity_pose(),
             calib,
         );
         assert!(short.unwrap_err().to_string().contains("image.data"));
         let other = camera_image(
-            ImageData::Rgb8 { width: 2, height: 4, data: vec![0; 24] },
+            ImageData::Rgb8 {
+                width: 2,
+                height: 4,
+                data: vec![0; 24],
+            },
             identity_pose(),
             calib,
         );
-        assert!(other.unwrap_err().to_string().contains("intrinsics are for 4x2"));
+        assert!(
+            other
+                .unwrap_err()
+                .to_string()
+                .contains("intrinsics are for 4x2")
+        );
     }
 
     #[test]
     fn png_size_is_probed_from_the_header() {
         let img = image::RgbImage::new(5, 3);
         let mut png = Vec::new();
-        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png).unwrap();
+        img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .unwrap();
         let calib = intrinsics(5, 3, 10.0, 10.0, 2.5, 1.5);
         let cam = camera_image(ImageData::Png(png.clone()), identity_pose(), calib).unwrap();
-        assert!(matches!(cam.image, Some(camera_image::Image::Compressed(ref c)) if c.format == "png"));
+        assert!(
+            matches!(cam.image, Some(camera_image::Image::Compressed(ref c)) if c.format == "png")
+        );
         let wrong = intrinsics(6, 3, 10.0, 10.0, 2.5, 1.5);
         assert!(camera_image(ImageData::Png(png), identity_pose(), wrong).is_err());
         assert!(camera_image(ImageData::Jpeg(vec![1, 2, 3]), identity_pose(), calib).is_err());

@@ -38,6 +38,7 @@ pub mod cli;
 mod client;
 mod config;
 mod error;
+pub mod eval;
 mod frame;
 pub mod loadtest;
 mod outcome;
@@ -53,4 +54,6 @@ pub use frame::{
     identity_pose, intrinsics, intrinsics_from_fov, pose, unpack_point_cloud,
 };
 pub use landing_proto::v1;
-pub use outcome::{FieldViolation, FrameError, FrameOutcome, StreamItem, code_label, duration_from_proto};
+pub use outcome::{
+    FieldViolation, FrameError, FrameOutcome, StreamItem, code_label, duration_from_proto,
+};

@@ -29,7 +29,10 @@ impl Default for LoadTestConfig {
             streams: 1,
             rate_hz: None,
             duration: Duration::from_secs(10),
-            stream: StreamConfig { max_in_flight: 4, ..StreamConfig::default() },
+            stream: StreamConfig {
+                max_in_flight: 4,
+                ..StreamConfig::default()
+            },
         }
     }
 }
@@ -98,7 +101,11 @@ impl LoadTestReport {
 
     /// Answers that were not `ok` or `skipped`.
     pub fn failed(&self) -> u64 {
-        self.outcomes.iter().filter(|(k, _)| *k != "ok" && *k != "skipped").map(|(_, v)| v).sum()
+        self.outcomes
+            .iter()
+            .filter(|(k, _)| *k != "ok" && *k != "skipped")
+            .map(|(_, v)| v)
+            .sum()
     }
 }
 
@@ -124,15 +131,24 @@ pub async fn run_load_test(
     progress: Option<&(dyn Fn(u64, Duration) + Sync)>,
 ) -> Result<LoadTestReport, ClientError> {
     if frames.is_empty() {
-        return Err(ClientError::InvalidInput { field: "frames", reason: "no frames to send".into() });
+        return Err(ClientError::InvalidInput {
+            field: "frames",
+            reason: "no frames to send".into(),
+        });
     }
     if config.streams == 0 {
-        return Err(ClientError::InvalidInput { field: "streams", reason: "must be at least 1".into() });
+        return Err(ClientError::InvalidInput {
+            field: "streams",
+            reason: "must be at least 1".into(),
+        });
     }
     if let Some(r) = config.rate_hz
         && !(r.is_finite() && r > 0.0)
     {
-        return Err(ClientError::InvalidInput { field: "rate", reason: format!("{r} is not a positive rate") });
+        return Err(ClientError::InvalidInput {
+            field: "rate",
+            reason: format!("{r} is not a positive rate"),
+        });
     }
     let answered = Arc::new(std::sync::atomic::AtomicU64::new(0));
     let started = Instant::now();
@@ -185,16 +201,26 @@ pub async fn run_load_test(
         outcomes: all.outcomes,
         unanswered: all.unanswered,
         unexpected: all.unexpected,
-        throughput_fps: if elapsed > 0.0 { ok as f64 / elapsed } else { 0.0 },
+        throughput_fps: if elapsed > 0.0 {
+            ok as f64 / elapsed
+        } else {
+            0.0
+        },
         latency_ms: Percentiles::of(&all.ok_latency),
         all_latency_ms: Percentiles::of(&all.all_latency),
-        mean_sites: if ok > 0 { all.sites as f64 / ok as f64 } else { 0.0 },
+        mean_sites: if ok > 0 {
+            all.sites as f64 / ok as f64
+        } else {
+            0.0
+        },
         stream_errors: all.errors,
     })
 }
 
 /// Awaits every task, in order.
-async fn futures_join<T>(tasks: Vec<tokio::task::JoinHandle<T>>) -> Vec<Result<T, tokio::task::JoinError>> {
+async fn futures_join<T>(
+    tasks: Vec<tokio::task::JoinHandle<T>>,
+) -> Vec<Result<T, tokio::task::JoinError>> {
     let mut out = Vec::with_capacity(tasks.len());
     for t in tasks {
         out.push(t.await);
@@ -233,7 +259,10 @@ async fn one_stream(
             frame.sequence = sent;
             frame.drone_id = drone.clone();
             // A full window blocks here until answers come back: the back-pressure under test.
-            let send = tokio::time::timeout(duration.saturating_sub(started.elapsed()) + Duration::from_millis(1), sender.send(frame));
+            let send = tokio::time::timeout(
+                duration.saturating_sub(started.elapsed()) + Duration::from_millis(1),
+                sender.send(frame),
+            );
             match send.await {
                 Ok(Ok(())) => sent += 1,
                 Ok(Err(e)) => {
@@ -279,10 +308,14 @@ async fn one_stream(
         Ok((sent, error)) => {
             tally.sent = sent;
             if let Some(e) = error {
-                tally.errors.push(format!("stream {stream_index}: send failed: {e}"));
+                tally
+                    .errors
+                    .push(format!("stream {stream_index}: send failed: {e}"));
             }
         }
-        Err(e) => tally.errors.push(format!("stream {stream_index}: sender task failed: {e}")),
+        Err(e) => tally
+            .errors
+            .push(format!("stream {stream_index}: sender task failed: {e}")),
     }
     tally
 }
@@ -303,7 +336,11 @@ mod tests {
 
     #[test]
     fn exactly_once_needs_every_frame_answered() {
-        let mut r = LoadTestReport { sent: 3, answered: 3, ..Default::default() };
+        let mut r = LoadTestReport {
+            sent: 3,
+            answered: 3,
+            ..Default::default()
+        };
         assert!(r.exactly_once());
         r.unanswered = 1;
         assert!(!r.exactly_once());

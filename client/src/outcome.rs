@@ -134,16 +134,21 @@ impl FrameError {
 
     /// The field paths of the violations, for quick checks.
     pub fn fields(&self) -> Vec<&str> {
-        self.field_violations.iter().map(|v| v.field.as_str()).collect()
+        self.field_violations
+            .iter()
+            .map(|v| v.field.as_str())
+            .collect()
     }
 
     fn absorb_detail(&mut self, type_url: &str, value: &[u8]) {
         match type_url {
             BAD_REQUEST_TYPE => {
                 if let Ok(bad) = rpc::BadRequest::decode(value) {
-                    self.field_violations.extend(bad.field_violations.into_iter().map(|v| {
-                        FieldViolation { field: v.field, description: v.description }
-                    }));
+                    self.field_violations
+                        .extend(bad.field_violations.into_iter().map(|v| FieldViolation {
+                            field: v.field,
+                            description: v.description,
+                        }));
                 }
             }
             RETRY_INFO_TYPE => {
@@ -184,9 +189,9 @@ pub(crate) fn outcome_of(response: StreamLandingSitesResponse) -> (u64, FrameOut
     let outcome = match response.outcome {
         Some(Outcome::Result(r)) => FrameOutcome::Result(r),
         Some(Outcome::Error(s)) => FrameOutcome::Error(FrameError::from_rpc_status(&s)),
-        Some(Outcome::Skipped(s)) => {
-            FrameOutcome::Skipped { superseded_by: s.superseded_by_sequence }
-        }
+        Some(Outcome::Skipped(s)) => FrameOutcome::Skipped {
+            superseded_by: s.superseded_by_sequence,
+        },
         None => FrameOutcome::Error(FrameError {
             code: tonic::Code::Internal,
             message: "the server's response carried no outcome".to_owned(),
@@ -202,7 +207,10 @@ mod tests {
     use super::*;
 
     fn any<M: Message>(type_url: &str, m: &M) -> prost_types::Any {
-        prost_types::Any { type_url: type_url.to_owned(), value: m.encode_to_vec() }
+        prost_types::Any {
+            type_url: type_url.to_owned(),
+            value: m.encode_to_vec(),
+        }
     }
 
     fn bad_request_status() -> rpc::Status {
@@ -222,10 +230,16 @@ mod tests {
                 any(
                     RETRY_INFO_TYPE,
                     &rpc::RetryInfo {
-                        retry_delay: Some(prost_types::Duration { seconds: 1, nanos: 500_000_000 }),
+                        retry_delay: Some(prost_types::Duration {
+                            seconds: 1,
+                            nanos: 500_000_000,
+                        }),
                     },
                 ),
-                any("type.googleapis.com/google.rpc.DebugInfo", &rpc::RetryInfo::default()),
+                any(
+                    "type.googleapis.com/google.rpc.DebugInfo",
+                    &rpc::RetryInfo::default(),
+                ),
             ],
         }
     }
@@ -236,17 +250,17 @@ mod tests {
         assert_eq!(e.code, tonic::Code::InvalidArgument);
         assert_eq!(e.fields(), vec!["frame.point_cloud.point_stride"]);
         assert_eq!(e.retry_delay, Some(Duration::from_millis(1500)));
-        assert!(e.to_string().contains("invalid_argument: bad frame; frame.point_cloud.point_stride"));
+        assert!(
+            e.to_string()
+                .contains("invalid_argument: bad frame; frame.point_cloud.point_stride")
+        );
     }
 
     #[test]
     fn decodes_details_from_tonic_status() {
         let details = bad_request_status().encode_to_vec();
-        let status = tonic::Status::with_details(
-            tonic::Code::InvalidArgument,
-            "bad frame",
-            details.into(),
-        );
+        let status =
+            tonic::Status::with_details(tonic::Code::InvalidArgument, "bad frame", details.into());
         let e = FrameError::from_status(&status);
         assert_eq!(e.fields(), vec!["frame.point_cloud.point_stride"]);
         assert_eq!(e.retry_delay, Some(Duration::from_millis(1500)));
@@ -254,7 +268,8 @@ mod tests {
 
     #[test]
     fn garbage_details_are_ignored_not_fatal() {
-        let status = tonic::Status::with_details(tonic::Code::Internal, "x", vec![0xff, 0x01].into());
+        let status =
+            tonic::Status::with_details(tonic::Code::Internal, "x", vec![0xff, 0x01].into());
         let e = FrameError::from_status(&status);
         assert_eq!(e.code, tonic::Code::Internal);
         assert!(e.field_violations.is_empty());
@@ -262,21 +277,32 @@ mod tests {
 
     #[test]
     fn code_labels_are_snake_case() {
-        assert_eq!(code_label(tonic::Code::ResourceExhausted), "resource_exhausted");
+        assert_eq!(
+            code_label(tonic::Code::ResourceExhausted),
+            "resource_exhausted"
+        );
         assert_eq!(code_label(tonic::Code::Ok), "ok");
         assert_eq!(code_label(tonic::Code::InvalidArgument), "invalid_argument");
     }
 
     #[test]
     fn stream_response_without_outcome_is_an_internal_error() {
-        let (seq, outcome) =
-            outcome_of(StreamLandingSitesResponse { sequence: 7, outcome: None });
+        let (seq, outcome) = outcome_of(StreamLandingSitesResponse {
+            sequence: 7,
+            outcome: None,
+        });
         assert_eq!(seq, 7);
         assert_eq!(outcome.error().map(|e| e.code), Some(tonic::Code::Internal));
     }
 
     #[test]
     fn negative_durations_are_rejected() {
-        assert_eq!(duration_from_proto(prost_types::Duration { seconds: -1, nanos: 0 }), None);
+        assert_eq!(
+            duration_from_proto(prost_types::Duration {
+                seconds: -1,
+                nanos: 0
+            }),
+            None
+        );
     }
 }

@@ -18,7 +18,10 @@ pub struct PlyPoints {
 /// Reads a PLY file.
 pub fn read_ply(path: &Path) -> Result<PlyPoints, ClientError> {
     let bytes = std::fs::read(path).map_err(|e| ClientError::io(path, e))?;
-    parse_ply(&bytes).map_err(|reason| ClientError::Recording { path: path.display().to_string(), reason })
+    parse_ply(&bytes).map_err(|reason| ClientError::Recording {
+        path: path.display().to_string(),
+        reason,
+    })
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -110,11 +113,17 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyPoints, String> {
         match words.as_slice() {
             ["format", "ascii", _] => ascii = Some(true),
             ["format", "binary_little_endian", _] => ascii = Some(false),
-            ["format", other, ..] => return Err(format!("format `{other}` is not supported (ascii or binary_little_endian)")),
+            ["format", other, ..] => {
+                return Err(format!(
+                    "format `{other}` is not supported (ascii or binary_little_endian)"
+                ));
+            }
             ["comment", ..] | ["obj_info", ..] => {}
             ["element", name, count] => elements.push(Element {
                 name: (*name).to_owned(),
-                count: count.parse().map_err(|_| format!("bad element count `{count}`"))?,
+                count: count
+                    .parse()
+                    .map_err(|_| format!("bad element count `{count}`"))?,
                 properties: Vec::new(),
             }),
             ["property", "list", c, i, _] => {
@@ -134,7 +143,11 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyPoints, String> {
     let ascii = ascii.ok_or("no `format` line")?;
     let mut out = PlyPoints::default();
     let mut text = if ascii {
-        Some(std::str::from_utf8(&bytes[body..]).map_err(|_| "ascii body is not UTF-8")?.split_whitespace())
+        Some(
+            std::str::from_utf8(&bytes[body..])
+                .map_err(|_| "ascii body is not UTF-8")?
+                .split_whitespace(),
+        )
     } else {
         None
     };
@@ -142,7 +155,10 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyPoints, String> {
     for element in &elements {
         let is_vertex = element.name == "vertex";
         let index = |n: &str| {
-            element.properties.iter().position(|p| matches!(p, Property::Scalar(name, _) if name == n))
+            element
+                .properties
+                .iter()
+                .position(|p| matches!(p, Property::Scalar(name, _) if name == n))
         };
         let (xi, yi, zi) = if is_vertex {
             let get = |n: &str| index(n).ok_or(format!("vertex element has no `{n}` property"));
@@ -150,7 +166,11 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyPoints, String> {
         } else {
             (0, 0, 0)
         };
-        let ci = if is_vertex { index("class").or_else(|| index("label")) } else { None };
+        let ci = if is_vertex {
+            index("class").or_else(|| index("label"))
+        } else {
+            None
+        };
         if ci.is_some() {
             out.classes = Some(Vec::with_capacity(element.count));
         }
@@ -187,7 +207,8 @@ pub fn parse_ply(bytes: &[u8]) -> Result<PlyPoints, String> {
                 }
             }
             if is_vertex {
-                out.points.push([values[xi] as f32, values[yi] as f32, values[zi] as f32]);
+                out.points
+                    .push([values[xi] as f32, values[yi] as f32, values[zi] as f32]);
                 if let (Some(c), Some(classes)) = (ci, out.classes.as_mut()) {
                     let v = values[c];
                     if !(0.0..=255.0).contains(&v) {
@@ -230,8 +251,18 @@ mod tests {
 
     #[test]
     fn errors_name_the_problem() {
-        assert!(parse_ply(b"ply\nformat binary_big_endian 1.0\nend_header\n").unwrap_err().contains("binary_big_endian"));
-        assert!(parse_ply(b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n").unwrap_err().contains("`y`"));
+        assert!(
+            parse_ply(b"ply\nformat binary_big_endian 1.0\nend_header\n")
+                .unwrap_err()
+                .contains("binary_big_endian")
+        );
+        assert!(
+            parse_ply(
+                b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nend_header\n1\n"
+            )
+            .unwrap_err()
+            .contains("`y`")
+        );
         assert!(parse_ply(b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\nend_header\n1 2 3\n").unwrap_err().contains("ends early"));
         assert!(parse_ply(b"hello").is_err());
     }

@@ -56,7 +56,10 @@ pub fn frames_from_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, String> {
             continue;
         }
         let frame = Frame::decode(&message.data[..]).map_err(|e| {
-            format!("message {} on `{}` is not a landing.v1.Frame: {e}", message.sequence, message.channel.topic)
+            format!(
+                "message {} on `{}` is not a landing.v1.Frame: {e}",
+                message.sequence, message.channel.topic
+            )
         })?;
         frames.push(RecordedFrame {
             topic: message.channel.topic.clone(),
@@ -82,9 +85,10 @@ impl ResultWriter<BufWriter<std::fs::File>> {
     pub fn create(path: &Path) -> Result<Self, ClientError> {
         let file = std::fs::File::create(path).map_err(|e| ClientError::io(path, e))?;
         Self::new(BufWriter::new(file)).map_err(|e| match e {
-            ClientError::Recording { reason, .. } => {
-                ClientError::Recording { path: path.display().to_string(), reason }
-            }
+            ClientError::Recording { reason, .. } => ClientError::Recording {
+                path: path.display().to_string(),
+                reason,
+            },
             other => other,
         })
     }
@@ -93,21 +97,38 @@ impl ResultWriter<BufWriter<std::fs::File>> {
 impl<W: Write + Seek> ResultWriter<W> {
     /// Starts a recording on `w`.
     pub fn new(w: W) -> Result<Self, ClientError> {
-        let err = |e: mcap::McapError| ClientError::Recording { path: String::new(), reason: e.to_string() };
+        let err = |e: mcap::McapError| ClientError::Recording {
+            path: String::new(),
+            reason: e.to_string(),
+        };
         let mut writer = mcap::WriteOptions::new()
             .profile("")
             .library(concat!("landing-client ", env!("CARGO_PKG_VERSION")))
             .create(w)
             .map_err(err)?;
         let schema = writer
-            .add_schema(RESULT_SCHEMA, "protobuf", landing_proto::FILE_DESCRIPTOR_SET)
+            .add_schema(
+                RESULT_SCHEMA,
+                "protobuf",
+                landing_proto::FILE_DESCRIPTOR_SET,
+            )
             .map_err(err)?;
-        let channel = writer.add_channel(schema, RESULT_TOPIC, "protobuf", &BTreeMap::new()).map_err(err)?;
-        Ok(Self { writer, channel, sequence: 0 })
+        let channel = writer
+            .add_channel(schema, RESULT_TOPIC, "protobuf", &BTreeMap::new())
+            .map_err(err)?;
+        Ok(Self {
+            writer,
+            channel,
+            sequence: 0,
+        })
     }
 
     /// Appends one response, logged at `log_time_ns` (use the answered frame's log time).
-    pub fn write(&mut self, log_time_ns: u64, response: &StreamLandingSitesResponse) -> Result<(), ClientError> {
+    pub fn write(
+        &mut self,
+        log_time_ns: u64,
+        response: &StreamLandingSitesResponse,
+    ) -> Result<(), ClientError> {
         self.sequence += 1;
         self.writer
             .write_to_known_channel(
@@ -119,12 +140,18 @@ impl<W: Write + Seek> ResultWriter<W> {
                 },
                 &response.encode_to_vec(),
             )
-            .map_err(|e| ClientError::Recording { path: String::new(), reason: e.to_string() })
+            .map_err(|e| ClientError::Recording {
+                path: String::new(),
+                reason: e.to_string(),
+            })
     }
 
     /// Writes the summary and flushes.
     pub fn finish(mut self) -> Result<W, ClientError> {
-        let err = |e: mcap::McapError| ClientError::Recording { path: String::new(), reason: e.to_string() };
+        let err = |e: mcap::McapError| ClientError::Recording {
+            path: String::new(),
+            reason: e.to_string(),
+        };
         self.writer.finish().map_err(err)?;
         Ok(self.writer.into_inner())
     }
@@ -138,9 +165,15 @@ mod tests {
     /// Writes frames the way a recorder does, with a second, unrelated channel in between.
     fn recording(frames: &[Frame]) -> Vec<u8> {
         let mut w = mcap::Writer::new(std::io::Cursor::new(Vec::new())).unwrap();
-        let s = w.add_schema(FRAME_SCHEMA, "protobuf", landing_proto::FILE_DESCRIPTOR_SET).unwrap();
-        let c = w.add_channel(s, "/drone/frame", "protobuf", &BTreeMap::new()).unwrap();
-        let other = w.add_channel(0, "/truth", "json", &BTreeMap::new()).unwrap();
+        let s = w
+            .add_schema(FRAME_SCHEMA, "protobuf", landing_proto::FILE_DESCRIPTOR_SET)
+            .unwrap();
+        let c = w
+            .add_channel(s, "/drone/frame", "protobuf", &BTreeMap::new())
+            .unwrap();
+        let other = w
+            .add_channel(0, "/truth", "json", &BTreeMap::new())
+            .unwrap();
         for (i, f) in frames.iter().enumerate() {
             let h = |channel_id| mcap::records::MessageHeader {
                 channel_id,
@@ -157,8 +190,13 @@ mod tests {
 
     #[test]
     fn reads_only_frame_messages_in_order() {
-        let frames: Vec<Frame> =
-            (0..3).map(|i| Frame { sequence: i, drone_id: "d".into(), ..Default::default() }).collect();
+        let frames: Vec<Frame> = (0..3)
+            .map(|i| Frame {
+                sequence: i,
+                drone_id: "d".into(),
+                ..Default::default()
+            })
+            .collect();
         let read = frames_from_bytes(&recording(&frames)).unwrap();
         assert_eq!(read.len(), 3);
         assert_eq!(read[2].frame, frames[2]);
@@ -178,14 +216,23 @@ mod tests {
         let mut w = ResultWriter::new(std::io::Cursor::new(Vec::new())).unwrap();
         let response = StreamLandingSitesResponse {
             sequence: 4,
-            outcome: Some(Outcome::Result(FrameResult { sequence: 4, ..Default::default() })),
+            outcome: Some(Outcome::Result(FrameResult {
+                sequence: 4,
+                ..Default::default()
+            })),
         };
         w.write(42, &response).unwrap();
         let bytes = w.finish().unwrap().into_inner();
-        let msgs: Vec<_> = mcap::MessageStream::new(&bytes).unwrap().map(|m| m.unwrap()).collect();
+        let msgs: Vec<_> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .collect();
         assert_eq!(msgs.len(), 1);
         assert_eq!(msgs[0].log_time, 42);
         assert_eq!(msgs[0].channel.topic, RESULT_TOPIC);
-        assert_eq!(StreamLandingSitesResponse::decode(&msgs[0].data[..]).unwrap(), response);
+        assert_eq!(
+            StreamLandingSitesResponse::decode(&msgs[0].data[..]).unwrap(),
+            response
+        );
     }
 }

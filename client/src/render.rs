@@ -30,7 +30,11 @@ pub struct RenderConfig {
 
 impl Default for RenderConfig {
     fn default() -> Self {
-        Self { top_down_px: 480, fill_alpha: 0.45, max_sites: 3 }
+        Self {
+            top_down_px: 480,
+            fill_alpha: 0.45,
+            max_sites: 3,
+        }
     }
 }
 
@@ -48,7 +52,8 @@ impl Rendered {
     pub fn camera_pixel(&self, world: [f64; 3]) -> Option<(u32, u32)> {
         let c = self.camera.as_ref()?;
         let (u, v) = c.project(world)?;
-        (u >= 0.0 && v >= 0.0 && u < c.width as f64 && v < c.height as f64).then_some((u as u32, v as u32))
+        (u >= 0.0 && v >= 0.0 && u < c.width as f64 && v < c.height as f64)
+            .then_some((u as u32, v as u32))
     }
 
     /// Pixel of a world point in the top-down panel, if inside it.
@@ -74,7 +79,12 @@ struct CameraView {
 impl CameraView {
     fn project(&self, world: [f64; 3]) -> Option<(f64, f64)> {
         let p = self.camera_from_world.apply(world);
-        (p[2] > 0.05).then(|| (self.fx * p[0] / p[2] + self.cx, self.fy * p[1] / p[2] + self.cy))
+        (p[2] > 0.05).then(|| {
+            (
+                self.fx * p[0] / p[2] + self.cx,
+                self.fy * p[1] / p[2] + self.cy,
+            )
+        })
     }
 }
 
@@ -98,26 +108,46 @@ impl TopView {
 type Projector<'a> = &'a dyn Fn([f64; 3]) -> Option<(f64, f64)>;
 
 /// Draws `result` over `frame`.
-pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Result<Rendered, ClientError> {
+pub fn render(
+    frame: &Frame,
+    result: &FrameResult,
+    config: &RenderConfig,
+) -> Result<Rendered, ClientError> {
     let cloud = frame
         .point_cloud
         .as_ref()
-        .ok_or(ClientError::InvalidInput { field: "frame.point_cloud", reason: "missing".into() })?;
+        .ok_or(ClientError::InvalidInput {
+            field: "frame.point_cloud",
+            reason: "missing".into(),
+        })?;
     let unpacked = unpack_point_cloud(cloud)?;
     let world = unpacked.to_world(cloud.pose.as_ref());
     let sites: Vec<_> = result.sites.iter().take(config.max_sites).collect();
 
     let (background, camera) = match frame.image.as_ref() {
         Some(img) => {
-            let pixels = decode_camera_image(img)?;
+            let mut pixels = decode_camera_image(img)?;
+            // Small sensor images are enlarged by a whole factor to the panel height, so that
+            // both panels are about the same size; the intrinsics scale with them.
+            let k = (config.top_down_px / pixels.height().max(1)).max(1);
+            if k > 1 {
+                pixels = image::imageops::resize(
+                    &pixels,
+                    pixels.width() * k,
+                    pixels.height() * k,
+                    image::imageops::FilterType::Nearest,
+                );
+            }
             let calib = img.calibration.unwrap_or_default();
             let pose = img.pose.unwrap_or_default();
+            let k = k as f64;
             let view = CameraView {
                 camera_from_world: RigidTransform::from_pose(&pose).inverse(),
-                fx: calib.fx,
-                fy: calib.fy,
-                cx: calib.cx,
-                cy: calib.cy,
+                fx: calib.fx * k,
+                fy: calib.fy * k,
+                // Pixel i covers [i, i + 1), as where points are drawn, so the scale is plain.
+                cx: calib.cx * k,
+                cy: calib.cy * k,
                 width: pixels.width(),
                 height: pixels.height(),
             };
@@ -126,7 +156,9 @@ pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Res
         None => (None, None),
     };
     let cam_w = background.as_ref().map_or(0, |b| b.width());
-    let height = background.as_ref().map_or(config.top_down_px, |b| b.height().max(config.top_down_px));
+    let height = background
+        .as_ref()
+        .map_or(config.top_down_px, |b| b.height().max(config.top_down_px));
     let mut canvas = RgbImage::from_pixel(cam_w + config.top_down_px, height, Rgb([25, 25, 30]));
     if let Some(bg) = &background {
         image::imageops::replace(&mut canvas, bg, 0, 0);
@@ -170,7 +202,11 @@ pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Res
     // Points: height-coloured dots.
     let (z0, z1) = min_max(&world.iter().map(|p| p[2]).collect::<Vec<_>>());
     for p in &world {
-        let t = if z1 > z0 { ((p[2] - z0) / (z1 - z0)) as f32 } else { 0.5 };
+        let t = if z1 > z0 {
+            ((p[2] - z0) / (z1 - z0)) as f32
+        } else {
+            0.5
+        };
         let c = height_colour(t);
         if let Some(cam) = &camera
             && let Some((u, v)) = cam.project(*p)
@@ -183,15 +219,23 @@ pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Res
 
     // Sites, worst first so the best is drawn on top.
     for site in sites.iter().rev() {
-        let Some(poly) = site.polygon.as_ref() else { continue };
-        let ring3 = |r: &LinearRing| -> Vec<[f64; 3]> { r.points.iter().map(|p| [p.x, p.y, p.z]).collect() };
+        let Some(poly) = site.polygon.as_ref() else {
+            continue;
+        };
+        let ring3 = |r: &LinearRing| -> Vec<[f64; 3]> {
+            r.points.iter().map(|p| [p.x, p.y, p.z]).collect()
+        };
         let shell = poly.shell.as_ref().map(ring3).unwrap_or_default();
         let holes: Vec<Vec<[f64; 3]>> = poly.holes.iter().map(ring3).collect();
         let centre = site.center.map(|c| [c.x, c.y, c.z]).unwrap_or([0.0; 3]);
         let circle: Vec<[f64; 3]> = (0..72)
             .map(|k| {
                 let a = k as f64 / 72.0 * std::f64::consts::TAU;
-                [centre[0] + site.safe_radius_m * a.cos(), centre[1] + site.safe_radius_m * a.sin(), centre[2]]
+                [
+                    centre[0] + site.safe_radius_m * a.cos(),
+                    centre[1] + site.safe_radius_m * a.sin(),
+                    centre[2],
+                ]
             })
             .collect();
         let panels: [(Projector<'_>, u32, u32); 2] = [
@@ -199,17 +243,33 @@ pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Res
             (&|w| Some(top.project(w)), cam_w, cam_w + top.size),
         ];
         for (project, x_lo, x_hi) in panels {
-            let proj = |ring: &[[f64; 3]]| -> Option<Vec<(f64, f64)>> { ring.iter().map(|p| project(*p)).collect() };
+            let proj = |ring: &[[f64; 3]]| -> Option<Vec<(f64, f64)>> {
+                ring.iter().map(|p| project(*p)).collect()
+            };
             if x_hi == x_lo {
                 continue;
             }
             if let Some(s) = proj(&shell) {
-                fill_polygon(&mut canvas, std::slice::from_ref(&s), POLYGON_GREEN, config.fill_alpha, x_lo, x_hi);
+                fill_polygon(
+                    &mut canvas,
+                    std::slice::from_ref(&s),
+                    POLYGON_GREEN,
+                    config.fill_alpha,
+                    x_lo,
+                    x_hi,
+                );
                 polyline(&mut canvas, &s, true, POLYGON_GREEN, x_lo, x_hi);
             }
             for h in &holes {
                 if let Some(h) = proj(h) {
-                    fill_polygon(&mut canvas, std::slice::from_ref(&h), HOLE_ORANGE, 0.8, x_lo, x_hi);
+                    fill_polygon(
+                        &mut canvas,
+                        std::slice::from_ref(&h),
+                        HOLE_ORANGE,
+                        0.8,
+                        x_lo,
+                        x_hi,
+                    );
                     polyline(&mut canvas, &h, true, HOLE_ORANGE, x_lo, x_hi);
                 }
             }
@@ -221,12 +281,19 @@ pub fn render(frame: &Frame, result: &FrameResult, config: &RenderConfig) -> Res
             }
         }
     }
-    Ok(Rendered { image: canvas, camera, top })
+    Ok(Rendered {
+        image: canvas,
+        camera,
+        top,
+    })
 }
 
 /// Decodes the frame's camera image to RGB8.
 pub fn decode_camera_image(img: &landing_proto::v1::CameraImage) -> Result<RgbImage, ClientError> {
-    let err = |reason: String| ClientError::Image { what: "frame.image".into(), reason };
+    let err = |reason: String| ClientError::Image {
+        what: "frame.image".into(),
+        reason,
+    };
     match img.image.as_ref() {
         Some(camera_image::Image::Compressed(c)) => {
             let format = match c.format.as_str() {
@@ -234,12 +301,20 @@ pub fn decode_camera_image(img: &landing_proto::v1::CameraImage) -> Result<RgbIm
                 "jpeg" | "jpg" => image::ImageFormat::Jpeg,
                 other => return Err(err(format!("unsupported format `{other}`"))),
             };
-            Ok(image::load_from_memory_with_format(&c.data, format).map_err(|e| err(e.to_string()))?.to_rgb8())
+            Ok(image::load_from_memory_with_format(&c.data, format)
+                .map_err(|e| err(e.to_string()))?
+                .to_rgb8())
         }
         Some(camera_image::Image::Raw(r)) => {
             let (w, h, step) = (r.width as usize, r.height as usize, r.step as usize);
             if r.encoding != "rgb8" || step < w * 3 || r.data.len() < step * h {
-                return Err(err(format!("raw image {}x{} `{}` step {step} with {} bytes", w, h, r.encoding, r.data.len())));
+                return Err(err(format!(
+                    "raw image {}x{} `{}` step {step} with {} bytes",
+                    w,
+                    h,
+                    r.encoding,
+                    r.data.len()
+                )));
             }
             let mut data = Vec::with_capacity(w * h * 3);
             for row in r.data.chunks(step).take(h) {
@@ -252,13 +327,20 @@ pub fn decode_camera_image(img: &landing_proto::v1::CameraImage) -> Result<RgbIm
 }
 
 fn min_max(v: &[f64]) -> (f64, f64) {
-    v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| (a.min(x), b.max(x)))
+    v.iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        })
 }
 
 /// A blue-to-red ramp for point heights, kept free of green so points never read as a polygon.
 fn height_colour(t: f32) -> Rgb<u8> {
     let t = t.clamp(0.0, 1.0);
-    Rgb([(60.0 + 195.0 * t) as u8, 60, (60.0 + 195.0 * (1.0 - t)) as u8])
+    Rgb([
+        (60.0 + 195.0 * t) as u8,
+        60,
+        (60.0 + 195.0 * (1.0 - t)) as u8,
+    ])
 }
 
 fn put(img: &mut RgbImage, u: f64, v: f64, c: Rgb<u8>, x_lo: u32, x_hi: u32) {
@@ -289,9 +371,18 @@ fn blend(img: &mut RgbImage, x: u32, y: u32, c: Rgb<u8>, alpha: f32) {
 
 /// Even-odd scanline fill of rings in canvas coordinates, clipped to columns `x_lo..x_hi`.
 /// Camera-panel rings come in panel coordinates, which equal canvas ones since that panel is at 0.
-fn fill_polygon(img: &mut RgbImage, rings: &[Vec<(f64, f64)>], c: Rgb<u8>, alpha: f32, x_lo: u32, x_hi: u32) {
+fn fill_polygon(
+    img: &mut RgbImage,
+    rings: &[Vec<(f64, f64)>],
+    c: Rgb<u8>,
+    alpha: f32,
+    x_lo: u32,
+    x_hi: u32,
+) {
     let ys = rings.iter().flatten().map(|p| p.1);
-    let (y0, y1) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| (a.min(y), b.max(y)));
+    let (y0, y1) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+        (a.min(y), b.max(y))
+    });
     if !y0.is_finite() || !y1.is_finite() {
         return;
     }
@@ -320,7 +411,14 @@ fn fill_polygon(img: &mut RgbImage, rings: &[Vec<(f64, f64)>], c: Rgb<u8>, alpha
     }
 }
 
-fn polyline(img: &mut RgbImage, pts: &[(f64, f64)], closed: bool, c: Rgb<u8>, x_lo: u32, x_hi: u32) {
+fn polyline(
+    img: &mut RgbImage,
+    pts: &[(f64, f64)],
+    closed: bool,
+    c: Rgb<u8>,
+    x_lo: u32,
+    x_hi: u32,
+) {
     let n = pts.len();
     let segments = if closed { n } else { n.saturating_sub(1) };
     for i in 0..segments {
@@ -344,14 +442,23 @@ fn star(img: &mut RgbImage, u: f64, v: f64, r: f64, x_lo: u32, x_hi: u32) {
             (u + rr * a.cos(), v + rr * a.sin())
         })
         .collect();
-    fill_polygon(img, std::slice::from_ref(&pts), STAR_YELLOW, 1.0, x_lo, x_hi);
+    fill_polygon(
+        img,
+        std::slice::from_ref(&pts),
+        STAR_YELLOW,
+        1.0,
+        x_lo,
+        x_hi,
+    );
     polyline(img, &pts, true, Rgb([0, 0, 0]), x_lo, x_hi);
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{FrameBuilder, ImageData, PointCloudBuilder, camera_image, intrinsics_from_fov, pose};
+    use crate::{
+        FrameBuilder, ImageData, PointCloudBuilder, camera_image, intrinsics_from_fov, pose,
+    };
     use landing_proto::v1::{LandingSite, Polygon, Vector3};
 
     fn v(x: f64, y: f64, z: f64) -> Vector3 {
@@ -360,20 +467,27 @@ mod tests {
 
     /// A 10 m square roof at z = 0 seen straight down from 30 m, with one hole.
     fn scene() -> (Frame, FrameResult) {
-        let pts: Vec<[f32; 3]> =
-            (0..400).map(|i| [(i % 20) as f32 - 10.0, (i / 20) as f32 - 10.0, 0.0]).collect();
+        let pts: Vec<[f32; 3]> = (0..400)
+            .map(|i| [(i % 20) as f32 - 10.0, (i / 20) as f32 - 10.0, 0.0])
+            .collect();
         let cloud = PointCloudBuilder::new(&pts).build().unwrap();
         // Camera at 30 m looking down: optical z = world -z, x = world x, y = world -y.
         let cam_pose = pose([0.0, 0.0, 30.0], [1.0, 0.0, 0.0, 0.0]);
         let calib = intrinsics_from_fov(160, 120, 60.0);
         let img = camera_image(
-            ImageData::Rgb8 { width: 160, height: 120, data: vec![128; 160 * 120 * 3] },
+            ImageData::Rgb8 {
+                width: 160,
+                height: 120,
+                data: vec![128; 160 * 120 * 3],
+            },
             cam_pose,
             calib,
         )
         .unwrap();
         let frame = FrameBuilder::new(1, cloud).image(img).build();
-        let ring = |pts: &[(f64, f64)]| LinearRing { points: pts.iter().map(|p| v(p.0, p.1, 0.0)).collect() };
+        let ring = |pts: &[(f64, f64)]| LinearRing {
+            points: pts.iter().map(|p| v(p.0, p.1, 0.0)).collect(),
+        };
         let site = LandingSite {
             rank: 1,
             polygon: Some(Polygon {
@@ -385,7 +499,13 @@ mod tests {
             safe_radius_m: 3.0,
             ..Default::default()
         };
-        (frame, FrameResult { sites: vec![site], ..Default::default() })
+        (
+            frame,
+            FrameResult {
+                sites: vec![site],
+                ..Default::default()
+            },
+        )
     }
 
     fn greenish(p: Rgb<u8>) -> bool {
@@ -396,11 +516,16 @@ mod tests {
     fn polygon_hole_and_star_land_where_the_site_is() {
         let (frame, result) = scene();
         let r = render(&frame, &result, &RenderConfig::default()).unwrap();
-        assert_eq!(r.image.width(), 160 + 480);
+        // The 160x120 image is enlarged 4x to the 480-pixel panel height.
+        assert_eq!(r.image.width(), 160 * 4 + 480);
         for panel in [Rendered::camera_pixel, Rendered::top_down_pixel] {
             // Inside the shell, away from hole, circle and star: green.
             let (x, y) = panel(&r, [-4.0, 3.5, 0.0]).expect("in view");
-            assert!(greenish(*r.image.get_pixel(x, y)), "{:?}", r.image.get_pixel(x, y));
+            assert!(
+                greenish(*r.image.get_pixel(x, y)),
+                "{:?}",
+                r.image.get_pixel(x, y)
+            );
             // Inside the hole: orange.
             let (x, y) = panel(&r, [3.0, 3.0, 0.0]).unwrap();
             let p = r.image.get_pixel(x, y);

@@ -31,13 +31,23 @@ pub fn region_polygons(
     regions: &Regions,
     _params: &BoundaryParams,
 ) -> Result<Vec<Polygon>, GeometryError> {
-    let mut scratch = Scratch { head: vec![EMPTY; points.len()], ..Scratch::default() };
+    let mut scratch = Scratch {
+        head: vec![EMPTY; points.len()],
+        ..Scratch::default()
+    };
     regions
         .regions
         .iter()
         .enumerate()
         .map(|(r, region)| {
-            region_polygon(tri, points, &regions.labels, r as u32, &region.triangles, &mut scratch)
+            region_polygon(
+                tri,
+                points,
+                &regions.labels,
+                r as u32,
+                &region.triangles,
+                &mut scratch,
+            )
         })
         .collect()
 }
@@ -140,7 +150,10 @@ fn trace_rings(
         loop {
             steps += 1;
             if steps > m {
-                return Err(GeometryError::IterationLimit { step: "boundary walk", limit: m });
+                return Err(GeometryError::IterationLimit {
+                    step: "boundary walk",
+                    limit: m,
+                });
             }
             s.used[cur] = true;
             let e = s.edges[cur] as usize;
@@ -154,7 +167,10 @@ fn trace_rings(
             while c != EMPTY {
                 guard += 1;
                 if guard > m {
-                    return Err(GeometryError::IterationLimit { step: "pinch vertex", limit: m });
+                    return Err(GeometryError::IterationLimit {
+                        step: "pinch vertex",
+                        limit: m,
+                    });
                 }
                 let ci = c as usize;
                 if !s.used[ci] || ci == start {

@@ -10,7 +10,8 @@
 //! - a point that turns out not to be strictly outside the hull (rounding in the distance order, or
 //!   a duplicate) is not dropped: it is kept aside and inserted at the end by walking to its
 //!   triangle and splitting it (or the edge it lies on), again followed by flips;
-//! - exact duplicate positions are found and triangulated once (the first index wins);
+//! - exact duplicate positions are found and triangulated once (normally the first index; a copy
+//!   of a seed point yields to the seed);
 //! - every loop is bounded and reports [`GeometryError::IterationLimit`] instead of spinning.
 //!
 //! The output layout is [`Triangulation`]'s: counter-clockwise triangles, half-edge twins.
@@ -90,23 +91,41 @@ fn triangulate_deferring(
     if i2 == EMPTY as usize {
         return Ok(Triangulation::default()); // all points on one line
     }
-    let (i1, i2) = if orient(xy(i0), xy(i1), xy(i2)) < 0.0 { (i2, i1) } else { (i1, i2) };
+    let (i1, i2) = if orient(xy(i0), xy(i1), xy(i2)) < 0.0 {
+        (i2, i1)
+    } else {
+        (i1, i2)
+    };
     let center = circumcenter(xy(i0), xy(i1), xy(i2));
-    let center = if center[0].is_finite() && center[1].is_finite() { center } else { mid };
+    let center = if center[0].is_finite() && center[1].is_finite() {
+        center
+    } else {
+        mid
+    };
 
     // Sweep order: distance from the seed circumcentre, ties by index (deterministic). The sweep
     // then works on ranks in this order, over a copy of the coordinates in this order: points that
     // meet in the sweep sit together in memory.
-    let mut order: Vec<(u64, u32)> =
-        (0..n).map(|i| (dist2(xy(i), center).to_bits(), i as u32)).collect();
+    let mut order: Vec<(u64, u32)> = (0..n)
+        .map(|i| (dist2(xy(i), center).to_bits(), i as u32))
+        .collect();
     order.sort_unstable();
     let coords: Vec<[f64; 2]> = order.iter().map(|&(_, i)| xy(i as usize)).collect();
-    let rank_of = |i: usize| order.iter().position(|&(_, j)| j as usize == i).unwrap_or(0) as u32;
+    let rank_of = |i: usize| {
+        order
+            .iter()
+            .position(|&(_, j)| j as usize == i)
+            .unwrap_or(0) as u32
+    };
     let (r0, r1, r2) = (rank_of(i0), rank_of(i1), rank_of(i2));
 
     let mut b = Builder::new(&coords, center);
     b.seed(r0, r1, r2);
-    let seeds = [coords[r0 as usize], coords[r1 as usize], coords[r2 as usize]];
+    let seeds = [
+        coords[r0 as usize],
+        coords[r1 as usize],
+        coords[r2 as usize],
+    ];
     let mut deferred = Vec::new();
     let mut k = 0;
     while k < n {
@@ -144,7 +163,10 @@ fn triangulate_deferring(
     triangles.shrink_to_fit();
     let mut halfedges = b.halfedges;
     halfedges.shrink_to_fit();
-    Ok(Triangulation { triangles, halfedges })
+    Ok(Triangulation {
+        triangles,
+        halfedges,
+    })
 }
 
 #[inline]
@@ -203,7 +225,10 @@ fn circumcenter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> [f64; 2] {
     let bl = dx * dx + dy * dy;
     let cl = ex * ex + ey * ey;
     let d = 0.5 / (dx * ey - dy * ex);
-    [a[0] + (ey * bl - dy * cl) * d, a[1] + (dx * cl - ex * bl) * d]
+    [
+        a[0] + (ey * bl - dy * cl) * d,
+        a[1] + (dx * cl - ex * bl) * d,
+    ]
 }
 
 /// The growing triangulation and its convex hull.
@@ -309,7 +334,9 @@ impl<'a> Builder<'a> {
             }
         }
         if start == EMPTY {
-            return Err(GeometryError::InvalidMesh { reason: "sweep hull lost its points".into() });
+            return Err(GeometryError::InvalidMesh {
+                reason: "sweep hull lost its points".into(),
+            });
         }
         start = self.hull_prev[start as usize];
         let mut e = start;
@@ -325,7 +352,10 @@ impl<'a> Builder<'a> {
                 return Ok(false);
             }
             if guard > self.points.len() {
-                return Err(GeometryError::IterationLimit { step: "hull walk", limit: guard });
+                return Err(GeometryError::IterationLimit {
+                    step: "hull walk",
+                    limit: guard,
+                });
             }
         }
         let n0 = self.hull_next[e as usize];
@@ -341,7 +371,14 @@ impl<'a> Builder<'a> {
             if orient(self.xy(n), self.xy(q), p) >= 0.0 {
                 break;
             }
-            let t = self.add_triangle(n, i, q, self.hull_tri[i as usize], EMPTY, self.hull_tri[n as usize]);
+            let t = self.add_triangle(
+                n,
+                i,
+                q,
+                self.hull_tri[i as usize],
+                EMPTY,
+                self.hull_tri[n as usize],
+            );
             self.hull_tri[i as usize] = t + 1;
             self.legalize(t + 2)?;
             self.hull_next[n as usize] = n;
@@ -354,7 +391,14 @@ impl<'a> Builder<'a> {
                 if orient(self.xy(q), self.xy(e), p) >= 0.0 {
                     break;
                 }
-                let t = self.add_triangle(q, i, e, EMPTY, self.hull_tri[e as usize], self.hull_tri[q as usize]);
+                let t = self.add_triangle(
+                    q,
+                    i,
+                    e,
+                    EMPTY,
+                    self.hull_tri[e as usize],
+                    self.hull_tri[q as usize],
+                );
                 self.hull_tri[q as usize] = t;
                 self.legalize(t + 2)?;
                 self.hull_next[e as usize] = e;
@@ -393,7 +437,10 @@ impl<'a> Builder<'a> {
         'walk: loop {
             steps += 1;
             if steps > limit {
-                return Err(GeometryError::IterationLimit { step: "point location", limit });
+                return Err(GeometryError::IterationLimit {
+                    step: "point location",
+                    limit,
+                });
             }
             for e in 3 * t..3 * t + 3 {
                 let (a, b) = (self.triangles[e], self.triangles[next_halfedge(e)]);
@@ -415,7 +462,11 @@ impl<'a> Builder<'a> {
             }
             break;
         }
-        let v = [self.triangles[3 * t], self.triangles[3 * t + 1], self.triangles[3 * t + 2]];
+        let v = [
+            self.triangles[3 * t],
+            self.triangles[3 * t + 1],
+            self.triangles[3 * t + 2],
+        ];
         if v.iter().any(|&v| self.xy(v) == p) {
             return Ok(()); // duplicate
         }
@@ -523,7 +574,10 @@ impl<'a> Builder<'a> {
                 continue;
             }
             if self.flips_left == 0 {
-                return Err(GeometryError::IterationLimit { step: "Delaunay flips", limit: self.flip_budget });
+                return Err(GeometryError::IterationLimit {
+                    step: "Delaunay flips",
+                    limit: self.flip_budget,
+                });
             }
             self.flips_left -= 1;
             self.triangles[a] = p1;
@@ -555,9 +609,15 @@ mod tests {
     fn check_deferring(points: &[[f64; 3]], defer: impl Fn(usize) -> bool, what: &str) {
         let ours = triangulate_deferring(points, defer).unwrap_or_else(|e| panic!("{what}: {e}"));
         let xy: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
-        ours.check_invariants(&xy, true).unwrap_or_else(|e| panic!("{what}: {e}"));
-        let spade =
-            any(points, &TriangulationConfig { triangulator: Triangulator::Spade }).unwrap();
+        ours.check_invariants(&xy, true)
+            .unwrap_or_else(|e| panic!("{what}: {e}"));
+        let spade = any(
+            points,
+            &TriangulationConfig {
+                triangulator: Triangulator::Spade,
+            },
+        )
+        .unwrap();
         assert_eq!(ours.len(), spade.len(), "{what}");
     }
 
@@ -565,12 +625,14 @@ mod tests {
     fn deferred_points_are_inserted_by_location() {
         for seed in 0..20u64 {
             let mut g = Pcg32::new(seed);
-            let random: Vec<[f64; 3]> =
-                (0..800).map(|_| [g.range(0.0, 10.0), g.range(0.0, 10.0), 0.0]).collect();
+            let random: Vec<[f64; 3]> = (0..800)
+                .map(|_| [g.range(0.0, 10.0), g.range(0.0, 10.0), 0.0])
+                .collect();
             check_deferring(&random, |i| i % 3 == seed as usize % 3, "random");
             // Lattice points: many land exactly on edges (split_edge), some on the hull.
-            let lattice: Vec<[f64; 3]> =
-                (0..600).map(|_| [g.range(0.0, 8.0).round(), g.range(0.0, 8.0).round(), 0.0]).collect();
+            let lattice: Vec<[f64; 3]> = (0..600)
+                .map(|_| [g.range(0.0, 8.0).round(), g.range(0.0, 8.0).round(), 0.0])
+                .collect();
             check_deferring(&lattice, |i| i % 2 == 0, "lattice");
             // Everything deferred but the seed: the sweep and the location path meet all cases.
             check_deferring(&lattice, |_| true, "lattice, all deferred");

@@ -5,8 +5,8 @@
 //! unit normal is steep enough (`|n · k| > dot_min`) or its vertical extent is below `z_min` (the
 //! bypass that keeps sensor noise from punching spurious holes into a flat mesh).
 
-use crate::triangulation::Triangulation;
 use crate::Params;
+use crate::triangulation::Triangulation;
 
 /// Parameters of [`filter_triangles`]; `Default` gives the paper's values.
 #[derive(Debug, Clone, PartialEq)]
@@ -56,14 +56,15 @@ pub fn filter_triangles(
     // |n·k| > dot_min with n = c / |c| is c_z^2 > dot_min^2 |c|^2 (dot_min >= 0): no square root.
     let dot_min2 = params.dot_min.max(0.0).powi(2);
     let z_min = params.z_min_m;
+    // One flag per point, so a triangle costs three byte loads for the class test.
+    let allowed: Option<Vec<bool>> =
+        classes.map(|c| c.iter().map(|&c| landable[usize::from(c)]).collect());
     tri.triangles
         .chunks_exact(3)
         .map(|t| {
             let (ia, ib, ic) = (t[0] as usize, t[1] as usize, t[2] as usize);
-            if let Some(c) = classes
-                && !(landable[usize::from(c[ia])]
-                    && landable[usize::from(c[ib])]
-                    && landable[usize::from(c[ic])])
+            if let Some(ok) = &allowed
+                && !(ok[ia] && ok[ib] && ok[ic])
             {
                 return false;
             }
@@ -72,7 +73,7 @@ pub fn filter_triangles(
             let ac = sub(c, a);
             let bc = sub(c, b);
             let longest2 = norm2(ab).max(norm2(ac)).max(norm2(bc));
-            if !(longest2 < l_max2) {
+            if longest2.is_nan() || longest2 >= l_max2 {
                 return false;
             }
             let n = cross(ab, ac);
@@ -92,7 +93,11 @@ pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 #[inline]
 pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 #[inline]
@@ -105,7 +110,10 @@ mod tests {
     use super::*;
 
     fn one(points: [[f64; 3]; 3], classes: Option<&[u8]>, params: &FilterParams) -> bool {
-        let tri = Triangulation { triangles: vec![0, 1, 2], halfedges: vec![u32::MAX; 3] };
+        let tri = Triangulation {
+            triangles: vec![0, 1, 2],
+            halfedges: vec![u32::MAX; 3],
+        };
         filter_triangles(&tri, &points, classes, params)[0]
     }
 
@@ -128,7 +136,14 @@ mod tests {
         let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 0.0], [0.0, 2.0, 0.0]];
         assert!(one(p, None, &FilterParams::default()));
         let p = [[0.0, 0.0, 0.0], [3.0, 0.0, 3.0], [0.0, 2.0, 0.0]];
-        assert!(!one(p, None, &FilterParams { dot_min: 0.0, ..FilterParams::default() }));
+        assert!(!one(
+            p,
+            None,
+            &FilterParams {
+                dot_min: 0.0,
+                ..FilterParams::default()
+            }
+        ));
         // Exactly l_max is dropped: the paper's test is strict.
         let p = [[0.0, 0.0, 0.0], [4.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
         assert!(!one(p, None, &FilterParams::default()));

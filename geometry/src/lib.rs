@@ -102,10 +102,18 @@ impl Params {
     /// [`Params::option_name`] gives the `landing.v1.PipelineOptions` name of the same knob.
     pub fn validate(&self) -> Result<(), GeometryError> {
         fn bad(field: &'static str, value: impl ToString, reason: &'static str) -> GeometryError {
-            GeometryError::InvalidParameter { field, value: value.to_string(), reason }
+            GeometryError::InvalidParameter {
+                field,
+                value: value.to_string(),
+                reason,
+            }
         }
         let finite_positive = |field, v: f64| {
-            if v.is_finite() && v > 0.0 { Ok(()) } else { Err(bad(field, v, "must be finite and > 0")) }
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(bad(field, v, "must be finite and > 0"))
+            }
         };
         let finite_non_negative = |field, v: f64| {
             if v.is_finite() && v >= 0.0 {
@@ -115,20 +123,27 @@ impl Params {
             }
         };
         finite_positive("l_max_m", self.l_max_m)?;
-        if !(self.l_max_m <= MAX_ABS_COORDINATE_M) {
+        if self.l_max_m > MAX_ABS_COORDINATE_M {
             return Err(bad("l_max_m", self.l_max_m, "must be <= 1e7"));
         }
         if !(self.dot_min >= 0.0 && self.dot_min < 1.0) {
             return Err(bad("dot_min", self.dot_min, "must be in [0, 1)"));
         }
         finite_non_negative("z_min_m", self.z_min_m)?;
-        if let Some(&c) = self.landable_classes.iter().find(|&&c| SemanticClass::from_u8(c).is_none())
+        if let Some(&c) = self
+            .landable_classes
+            .iter()
+            .find(|&&c| SemanticClass::from_u8(c).is_none())
         {
             return Err(bad("landable_classes", c, "not a semantic class (0..=14)"));
         }
         finite_positive("polylabel_precision_m", self.polylabel_precision_m)?;
         if self.polylabel_precision_m < MIN_POLYLABEL_PRECISION_M {
-            return Err(bad("polylabel_precision_m", self.polylabel_precision_m, "must be >= 0.001"));
+            return Err(bad(
+                "polylabel_precision_m",
+                self.polylabel_precision_m,
+                "must be >= 0.001",
+            ));
         }
         finite_non_negative("min_safe_radius_m", self.min_safe_radius_m)?;
         finite_non_negative("min_area_m2", self.min_area_m2)?;
@@ -173,7 +188,11 @@ impl Polygon {
     /// Area of the shell minus the holes, square metres.
     pub fn area(&self) -> f64 {
         validation::ring_signed_area(&self.shell).abs()
-            - self.holes.iter().map(|h| validation::ring_signed_area(h).abs()).sum::<f64>()
+            - self
+                .holes
+                .iter()
+                .map(|h| validation::ring_signed_area(h).abs())
+                .sum::<f64>()
     }
 
     /// OGC validity: see [`validation::check_polygon`].
@@ -248,7 +267,11 @@ pub struct Detection {
 pub enum GeometryError {
     /// A parameter is out of its valid range.
     #[error("parameter `{field}` = {value} is out of range: {reason}")]
-    InvalidParameter { field: &'static str, value: String, reason: &'static str },
+    InvalidParameter {
+        field: &'static str,
+        value: String,
+        reason: &'static str,
+    },
     /// A coordinate is NaN, infinite, or of absurd magnitude.
     #[error("point {index} has a non-finite or out-of-range coordinate {value}")]
     InvalidPoint { index: usize, value: f64 },
@@ -289,8 +312,10 @@ pub fn detect_with(
 ) -> Result<Detection, GeometryError> {
     params.validate()?;
     check_points(points, classes)?;
-    let pts: Vec<[f64; 3]> =
-        points.iter().map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]).collect();
+    let pts: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+        .collect();
     let mut timings = StepTimings::default();
 
     let t0 = Instant::now();
@@ -304,8 +329,11 @@ pub fn detect_with(
 
     let regions = regions::extract_regions(
         &tri,
+        &pts,
         mask,
-        &regions::RegionParams { min_triangles: params.min_region_triangles },
+        &regions::RegionParams {
+            min_triangles: params.min_region_triangles,
+        },
     )?;
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
@@ -314,10 +342,15 @@ pub fn detect_with(
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
-    let sites = ranking::rank_sites(&tri, &pts, &regions, polygons, &ranking::RankingParams::from(params))?;
+    let sites = ranking::rank_sites(&regions, polygons, &ranking::RankingParams::from(params))?;
     timings.polylabel = t4.elapsed();
 
-    Ok(Detection { sites, point_count: points.len(), triangle_count: tri.len(), timings })
+    Ok(Detection {
+        sites,
+        point_count: points.len(),
+        triangle_count: tri.len(),
+        timings,
+    })
 }
 
 /// Boundary checks on the input, once: finite, in range, one class per point.
@@ -325,12 +358,15 @@ fn check_points(points: &[[f32; 3]], classes: Option<&[u8]>) -> Result<(), Geome
     if let Some(c) = classes
         && c.len() != points.len()
     {
-        return Err(GeometryError::ClassCountMismatch { points: points.len(), classes: c.len() });
+        return Err(GeometryError::ClassCountMismatch {
+            points: points.len(),
+            classes: c.len(),
+        });
     }
     for (index, p) in points.iter().enumerate() {
         for &c in p {
             let v = f64::from(c);
-            if !(v.abs() <= MAX_ABS_COORDINATE_M) {
+            if !v.is_finite() || v.abs() > MAX_ABS_COORDINATE_M {
                 return Err(GeometryError::InvalidPoint { index, value: v });
             }
         }

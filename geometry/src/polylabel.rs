@@ -25,7 +25,10 @@ pub struct PolylabelParams {
 
 impl Default for PolylabelParams {
     fn default() -> Self {
-        Self { precision_m: crate::Params::default().polylabel_precision_m, max_cells: 2_000_000 }
+        Self {
+            precision_m: crate::Params::default().polylabel_precision_m,
+            max_cells: 2_000_000,
+        }
     }
 }
 
@@ -51,7 +54,10 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
         });
     }
     let Some(&first) = polygon.shell.first() else {
-        return Ok(Pole { center: [0.0, 0.0], distance: 0.0 });
+        return Ok(Pole {
+            center: [0.0, 0.0],
+            distance: 0.0,
+        });
     };
     let edges = Edges::new(polygon);
     let (mut min, mut max) = (first, first);
@@ -61,7 +67,10 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
     }
     let (w, h) = (max[0] - min[0], max[1] - min[1]);
     if !(w > 0.0 && h > 0.0) {
-        return Ok(Pole { center: first, distance: 0.0 });
+        return Ok(Pole {
+            center: first,
+            distance: 0.0,
+        });
     }
     // Square cells of side min(w, h), but never more than ~1024 of them to start with.
     let mut cell = w.min(h).max((w * h / 1024.0).sqrt());
@@ -101,10 +110,16 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
         }
         examined += 4;
         if examined > params.max_cells {
-            return Err(GeometryError::IterationLimit { step: "polylabel", limit: params.max_cells });
+            return Err(GeometryError::IterationLimit {
+                step: "polylabel",
+                limit: params.max_cells,
+            });
         }
     }
-    Ok(Pole { center: best.center, distance: best.d.max(0.0) })
+    Ok(Pole {
+        center: best.center,
+        distance: best.d.max(0.0),
+    })
 }
 
 /// Signed distance from `p` to the boundary of `polygon`: positive inside (inside the shell and
@@ -113,34 +128,76 @@ pub fn signed_distance(polygon: &Polygon, p: [f64; 2]) -> f64 {
     Edges::new(polygon).signed_distance(p)
 }
 
-/// All edges of all rings as flat segments (ax, ay, bx, by).
+/// All edges of all rings as flat segments (ax, ay, bx, by), in chunks of consecutive edges with
+/// bounding boxes, so a query skips the chunks that cannot hold the nearest edge or a crossing.
 struct Edges {
     segs: Vec<[f64; 4]>,
+    /// (first segment, end, [min x, min y, max x, max y]) per chunk.
+    chunks: Vec<(usize, usize, [f64; 4])>,
 }
+
+/// Edges per chunk: small enough to prune well, large enough to keep the chunk loop cheap.
+const CHUNK: usize = 16;
 
 impl Edges {
     fn new(polygon: &Polygon) -> Self {
         let mut segs = Vec::new();
+        let mut chunks = Vec::new();
         for ring in std::iter::once(&polygon.shell).chain(&polygon.holes) {
             let n = ring.len();
+            let mut start = segs.len();
             for i in 0..n {
                 let a = ring[i];
                 let b = ring[(i + 1) % n];
                 segs.push([a[0], a[1], b[0], b[1]]);
+                if segs.len() - start == CHUNK || i + 1 == n {
+                    let mut bb = [
+                        f64::INFINITY,
+                        f64::INFINITY,
+                        f64::NEG_INFINITY,
+                        f64::NEG_INFINITY,
+                    ];
+                    for s in &segs[start..] {
+                        bb = [
+                            bb[0].min(s[0]).min(s[2]),
+                            bb[1].min(s[1]).min(s[3]),
+                            bb[2].max(s[0]).max(s[2]),
+                            bb[3].max(s[1]).max(s[3]),
+                        ];
+                    }
+                    chunks.push((start, segs.len(), bb));
+                    start = segs.len();
+                }
             }
         }
-        Self { segs }
+        Self { segs, chunks }
     }
 
     fn signed_distance(&self, p: [f64; 2]) -> f64 {
         let mut inside = false;
         let mut d2 = f64::INFINITY;
-        for &[ax, ay, bx, by] in &self.segs {
-            // Even-odd ray cast towards +x over all rings: inside the shell and outside the holes.
-            if (ay > p[1]) != (by > p[1]) && p[0] < (bx - ax) * (p[1] - ay) / (by - ay) + ax {
-                inside = !inside;
+        for &(start, end, bb) in &self.chunks {
+            // A ray towards +x can only cross the chunk if p.y is within its y-range and the chunk
+            // reaches right of p.
+            let may_cross = p[1] >= bb[1] && p[1] <= bb[3] && p[0] <= bb[2];
+            let dx = (bb[0] - p[0]).max(p[0] - bb[2]).max(0.0);
+            let dy = (bb[1] - p[1]).max(p[1] - bb[3]).max(0.0);
+            let may_be_nearer = dx * dx + dy * dy < d2;
+            if !(may_cross || may_be_nearer) {
+                continue;
             }
-            d2 = d2.min(segment_distance2(p, ax, ay, bx, by));
+            for &[ax, ay, bx, by] in &self.segs[start..end] {
+                // Even-odd ray cast over all rings: inside the shell and outside the holes.
+                if may_cross
+                    && (ay > p[1]) != (by > p[1])
+                    && p[0] < (bx - ax) * (p[1] - ay) / (by - ay) + ax
+                {
+                    inside = !inside;
+                }
+                if may_be_nearer {
+                    d2 = d2.min(segment_distance2(p, ax, ay, bx, by));
+                }
+            }
         }
         let d = d2.sqrt();
         if inside { d } else { -d }
@@ -151,7 +208,11 @@ impl Edges {
 fn segment_distance2(p: [f64; 2], ax: f64, ay: f64, bx: f64, by: f64) -> f64 {
     let (dx, dy) = (bx - ax, by - ay);
     let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 { (((p[0] - ax) * dx + (p[1] - ay) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        (((p[0] - ax) * dx + (p[1] - ay) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let (ex, ey) = (ax + t * dx - p[0], ay + t * dy - p[1]);
     ex * ex + ey * ey
 }
@@ -185,7 +246,12 @@ struct Cell {
 impl Cell {
     fn new(center: [f64; 2], half: f64, edges: &Edges) -> Self {
         let d = edges.signed_distance(center);
-        Self { center, half, d, max: d + half * std::f64::consts::SQRT_2 }
+        Self {
+            center,
+            half,
+            d,
+            max: d + half * std::f64::consts::SQRT_2,
+        }
     }
 }
 
@@ -219,8 +285,18 @@ mod tests {
 
     #[test]
     fn square_pole_is_its_centre() {
-        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![] };
-        let pole = polylabel(&p, &PolylabelParams { precision_m: 0.01, ..Default::default() }).unwrap();
+        let p = Polygon {
+            shell: square(0.0, 0.0, 10.0),
+            holes: vec![],
+        };
+        let pole = polylabel(
+            &p,
+            &PolylabelParams {
+                precision_m: 0.01,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert!((pole.distance - 5.0).abs() <= 0.01, "{pole:?}");
         assert!((pole.center[0] - 5.0).abs() < 0.1 && (pole.center[1] - 5.0).abs() < 0.1);
     }
@@ -229,8 +305,18 @@ mod tests {
     fn a_central_hole_pushes_the_pole_aside() {
         let mut hole = square(4.0, 4.0, 2.0);
         hole.reverse();
-        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![hole] };
-        let pole = polylabel(&p, &PolylabelParams { precision_m: 0.01, ..Default::default() }).unwrap();
+        let p = Polygon {
+            shell: square(0.0, 0.0, 10.0),
+            holes: vec![hole],
+        };
+        let pole = polylabel(
+            &p,
+            &PolylabelParams {
+                precision_m: 0.01,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         // Best is in a corner region: distance to the nearest of two outer edges and the hole.
         assert!(p.signed_distance(pole.center) >= pole.distance - 1e-9);
         assert!(pole.distance > 2.0 && pole.distance < 2.5, "{pole:?}");
@@ -241,14 +327,31 @@ mod tests {
     fn degenerate_polygons_give_zero() {
         let pole = polylabel(&Polygon::default(), &PolylabelParams::default()).unwrap();
         assert_eq!(pole.distance, 0.0);
-        let line = Polygon { shell: vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], holes: vec![] };
-        assert_eq!(polylabel(&line, &PolylabelParams::default()).unwrap().distance, 0.0);
+        let line = Polygon {
+            shell: vec![[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]],
+            holes: vec![],
+        };
+        assert_eq!(
+            polylabel(&line, &PolylabelParams::default())
+                .unwrap()
+                .distance,
+            0.0
+        );
     }
 
     #[test]
     fn bad_precision_is_an_error() {
-        let p = Polygon { shell: square(0.0, 0.0, 1.0), holes: vec![] };
-        let r = polylabel(&p, &PolylabelParams { precision_m: 0.0, ..Default::default() });
+        let p = Polygon {
+            shell: square(0.0, 0.0, 1.0),
+            holes: vec![],
+        };
+        let r = polylabel(
+            &p,
+            &PolylabelParams {
+                precision_m: 0.0,
+                ..Default::default()
+            },
+        );
         assert!(matches!(r, Err(GeometryError::InvalidParameter { .. })));
     }
 }

@@ -6,10 +6,8 @@
 //! the polygon) and stops once `max_sites` sites beat every remaining bound: the result is the same
 //! as running it on every region.
 
-use crate::filter::{cross, sub};
 use crate::polylabel::{PolylabelParams, polylabel};
 use crate::regions::Regions;
-use crate::triangulation::Triangulation;
 use crate::validation::ring_signed_area;
 use crate::{GeometryError, LandingSite, Params, Polygon};
 
@@ -50,22 +48,26 @@ impl From<&Params> for RankingParams {
 
 /// Turns the polygons of `regions` (one each, same order) into ranked landing sites.
 pub fn rank_sites(
-    tri: &Triangulation,
-    points: &[[f64; 3]],
     regions: &Regions,
     polygons: Vec<Polygon>,
     params: &RankingParams,
 ) -> Result<Vec<LandingSite>, GeometryError> {
     if polygons.len() != regions.regions.len() {
         return Err(GeometryError::InvalidMesh {
-            reason: format!("{} polygons for {} regions", polygons.len(), regions.regions.len()),
+            reason: format!(
+                "{} polygons for {} regions",
+                polygons.len(),
+                regions.regions.len()
+            ),
         });
     }
     // (upper bound of the radius, region index, polygon, area) of every region that can qualify.
     let mut candidates: Vec<(f64, usize, Polygon, f64)> = Vec::new();
     for (r, mut polygon) in polygons.into_iter().enumerate() {
         if params.min_hole_area_m2 > 0.0 {
-            polygon.holes.retain(|h| ring_signed_area(h).abs() >= params.min_hole_area_m2);
+            polygon
+                .holes
+                .retain(|h| ring_signed_area(h).abs() >= params.min_hole_area_m2);
         }
         let area = polygon.area();
         if area < params.min_area_m2 {
@@ -79,7 +81,6 @@ pub fn rank_sites(
     }
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
 
-    let mut stamp = vec![u32::MAX; points.len()];
     let mut sites: Vec<(usize, LandingSite)> = Vec::new();
     for (bound, r, polygon, area) in candidates {
         if sites.len() >= params.max_sites {
@@ -94,10 +95,9 @@ pub fn rank_sites(
         if pole.distance < params.min_safe_radius_m {
             continue;
         }
-        let triangles = &regions.regions[r].triangles;
-        let plane = plane_of(tri, points, triangles, r as u32, &mut stamp);
-        let [nx, ny, nz] = plane.normal;
-        let [mx, my, mz] = plane.mean;
+        let region = &regions.regions[r];
+        let [nx, ny, nz] = region.normal;
+        let [mx, my, mz] = region.mean;
         let cz = mz - (nx * (pole.center[0] - mx) + ny * (pole.center[1] - my)) / nz;
         sites.push((
             r,
@@ -108,9 +108,9 @@ pub fn rank_sites(
                 center: [pole.center[0], pole.center[1], cz],
                 safe_radius_m: pole.distance,
                 area_m2: area,
-                normal: plane.normal,
-                point_count: plane.point_count,
-                triangle_count: triangles.len(),
+                normal: region.normal,
+                point_count: region.point_count,
+                triangle_count: region.triangles.len(),
             },
         ));
     }
@@ -129,45 +129,4 @@ pub fn rank_sites(
             s
         })
         .collect())
-}
-
-struct Plane {
-    mean: [f64; 3],
-    normal: [f64; 3],
-    point_count: usize,
-}
-
-/// Mean of the region's distinct points and its area-weighted unit normal (z up).
-fn plane_of(
-    tri: &Triangulation,
-    points: &[[f64; 3]],
-    triangles: &[u32],
-    label: u32,
-    stamp: &mut [u32],
-) -> Plane {
-    let mut sum = [0.0; 3];
-    let mut count = 0usize;
-    let mut normal = [0.0; 3];
-    for &t in triangles {
-        let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
-        for &i in v {
-            if stamp[i as usize] != label {
-                stamp[i as usize] = label;
-                let p = points[i as usize];
-                sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
-                count += 1;
-            }
-        }
-        let (a, b, c) = (points[v[0] as usize], points[v[1] as usize], points[v[2] as usize]);
-        let n = cross(sub(b, a), sub(c, a));
-        normal = [normal[0] + n[0], normal[1] + n[1], normal[2] + n[2]];
-    }
-    let k = count.max(1) as f64;
-    let len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
-    let normal = if len > 0.0 && normal[2] > 0.0 {
-        [normal[0] / len, normal[1] / len, normal[2] / len]
-    } else {
-        [0.0, 0.0, 1.0]
-    };
-    Plane { mean: [sum[0] / k, sum[1] / k, sum[2] / k], normal, point_count: count }
 }

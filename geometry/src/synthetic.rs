@@ -121,7 +121,8 @@ pub struct RoofTruth {
 impl RoofTruth {
     /// True when (x, y) is on this roof (inside the outline, outside the courtyard).
     pub fn contains(&self, x: f64, y: f64) -> bool {
-        let inside = |lo: [f64; 2], hi: [f64; 2]| x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
+        let inside =
+            |lo: [f64; 2], hi: [f64; 2]| x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1];
         inside(self.min, self.max) && !self.courtyard.is_some_and(|(lo, hi)| inside(lo, hi))
     }
 
@@ -173,7 +174,10 @@ impl Scene {
             height_m: params.roof_height_m,
             slope: params.roof_slope,
             courtyard: params.courtyard_m.map(|[cw, ch]| {
-                ([(w - cw) / 2.0, (h - ch) / 2.0], [(w + cw) / 2.0, (h + ch) / 2.0])
+                (
+                    [(w - cw) / 2.0, (h - ch) / 2.0],
+                    [(w + cw) / 2.0, (h + ch) / 2.0],
+                )
             }),
         }];
         if let Some(s) = &params.second_roof {
@@ -205,7 +209,11 @@ impl Scene {
             let base = main.height_at(x0);
             let top = base + rng.range(params.obstacle_height_m[0], params.obstacle_height_m[1]);
             let class = OBSTACLE_CLASSES[obstacles.len() % OBSTACLE_CLASSES.len()];
-            obstacles.push(ObstacleTruth { min: [x0, y0, base], max: [x0 + sx, y0 + sy, top], class });
+            obstacles.push(ObstacleTruth {
+                min: [x0, y0, base],
+                max: [x0 + sx, y0 + sy, top],
+                class,
+            });
         }
 
         // Extent of everything, with the ground margin.
@@ -263,7 +271,10 @@ impl Scene {
                         let (p, q) = (corners[k], corners[(k + 1) % 4]);
                         let len = ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt();
                         // Outward normal of a counter-clockwise edge is (dy, -dx).
-                        let nrm = [(q[1] - p[1]) / len * outward, -(q[0] - p[0]) / len * outward];
+                        let nrm = [
+                            (q[1] - p[1]) / len * outward,
+                            -(q[0] - p[0]) / len * outward,
+                        ];
                         let along = (len / step).floor() as usize;
                         for i in 0..along {
                             let t = (i as f64 + rng.range(0.1, 0.9)) / along as f64;
@@ -285,7 +296,12 @@ impl Scene {
                 }
             }
         }
-        Scene { points, classes, truth: SceneTruth { roofs, obstacles }, spacing_m: dx.max(dy) }
+        Scene {
+            points,
+            classes,
+            truth: SceneTruth { roofs, obstacles },
+            spacing_m: dx.max(dy),
+        }
     }
 
     /// Indices of the points that stand on an obstacle (not roof, ground or wall).
@@ -294,7 +310,9 @@ impl Scene {
             let c = SemanticClass::from_u8(c)?;
             (!matches!(
                 c,
-                SemanticClass::BuildingRooftop | SemanticClass::Ground | SemanticClass::BuildingWall
+                SemanticClass::BuildingRooftop
+                    | SemanticClass::Ground
+                    | SemanticClass::BuildingWall
             ))
             .then_some(i)
         })
@@ -302,7 +320,12 @@ impl Scene {
 }
 
 /// Height and class of the top surface at (x, y).
-fn surface(roofs: &[RoofTruth], obstacles: &[ObstacleTruth], x: f64, y: f64) -> (f64, SemanticClass) {
+fn surface(
+    roofs: &[RoofTruth],
+    obstacles: &[ObstacleTruth],
+    x: f64,
+    y: f64,
+) -> (f64, SemanticClass) {
     let mut best: Option<(f64, SemanticClass)> = None;
     for o in obstacles {
         if o.contains(x, y) && best.is_none_or(|b| o.max[2] > b.0) {

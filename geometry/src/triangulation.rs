@@ -48,7 +48,7 @@ pub fn next_halfedge(e: usize) -> usize {
 /// The previous half-edge in the same triangle.
 #[inline]
 pub fn prev_halfedge(e: usize) -> usize {
-    if e % 3 == 0 { e + 2 } else { e - 1 }
+    if e.is_multiple_of(3) { e + 2 } else { e - 1 }
 }
 
 impl Triangulation {
@@ -76,8 +76,12 @@ impl Triangulation {
     ) -> Result<(), GeometryError> {
         let bad = |reason: String| Err(GeometryError::InvalidMesh { reason });
         let n = self.triangles.len();
-        if n % 3 != 0 || self.halfedges.len() != n {
-            return bad(format!("{} triangle indices, {} half-edges", n, self.halfedges.len()));
+        if !n.is_multiple_of(3) || self.halfedges.len() != n {
+            return bad(format!(
+                "{} triangle indices, {} half-edges",
+                n,
+                self.halfedges.len()
+            ));
         }
         let mut used = vec![false; points.len()];
         for (e, &v) in self.triangles.iter().enumerate() {
@@ -91,7 +95,9 @@ impl Triangulation {
         for t in 0..self.len() {
             let o = robust::orient2d(p(3 * t), p(3 * t + 1), p(3 * t + 2));
             if o <= 0.0 {
-                return bad(format!("triangle {t} is not counter-clockwise (orient2d = {o})"));
+                return bad(format!(
+                    "triangle {t} is not counter-clockwise (orient2d = {o})"
+                ));
             }
         }
         for e in 0..n {
@@ -102,12 +108,16 @@ impl Triangulation {
             }
             let o = o as usize;
             if o >= n || self.halfedges[o] as usize != e || o / 3 == e / 3 {
-                return bad(format!("half-edge {e} has opposite {o}, which does not point back"));
+                return bad(format!(
+                    "half-edge {e} has opposite {o}, which does not point back"
+                ));
             }
             if self.triangles[e] != self.triangles[next_halfedge(o)]
                 || self.triangles[o] != self.triangles[next_halfedge(e)]
             {
-                return bad(format!("half-edges {e} and {o} do not share their endpoints"));
+                return bad(format!(
+                    "half-edges {e} and {o} do not share their endpoints"
+                ));
             }
             if check_delaunay && e < o {
                 // The vertex of the neighbour opposite the shared edge must not lie strictly inside
@@ -115,7 +125,9 @@ impl Triangulation {
                 let q = p(prev_halfedge(o));
                 let ic = robust::incircle(p(e), p(next_halfedge(e)), p(prev_halfedge(e)), q);
                 if ic > 0.0 {
-                    return bad(format!("edge {e}-{o} is not locally Delaunay (incircle = {ic})"));
+                    return bad(format!(
+                        "edge {e}-{o} is not locally Delaunay (incircle = {ic})"
+                    ));
                 }
             }
         }
@@ -176,11 +188,16 @@ fn triangulate_spade(points: &[[f64; 3]]) -> Result<Triangulation, GeometryError
     let vertices: Vec<IndexedPoint> = (0..index_limit)
         .map(|i| {
             let p = points[i as usize];
-            IndexedPoint { position: spade::Point2::new(p[0], p[1]), index: i }
+            IndexedPoint {
+                position: spade::Point2::new(p[0], p[1]),
+                index: i,
+            }
         })
         .collect();
     let dt = spade::DelaunayTriangulation::<IndexedPoint>::bulk_load(vertices).map_err(|e| {
-        GeometryError::InvalidMesh { reason: format!("spade rejected the points: {e:?}") }
+        GeometryError::InvalidMesh {
+            reason: format!("spade rejected the points: {e:?}"),
+        }
     })?;
     // Inner faces have fixed indices 1..=num_inner_faces (0 is the outer face).
     let faces = dt.num_inner_faces();
@@ -198,12 +215,17 @@ fn triangulate_spade(points: &[[f64; 3]]) -> Result<Triangulation, GeometryError
             if let Some(other) = edge.rev().face().as_inner() {
                 let ot = other.fix().index() - 1;
                 let from = edge.to().data().index;
-                let j = (0..3).find(|&j| triangles[3 * ot + j] == from).ok_or_else(|| {
-                    GeometryError::InvalidMesh { reason: "spade face adjacency".into() }
-                })?;
+                let j = (0..3)
+                    .find(|&j| triangles[3 * ot + j] == from)
+                    .ok_or_else(|| GeometryError::InvalidMesh {
+                        reason: "spade face adjacency".into(),
+                    })?;
                 halfedges[3 * t + i] = (3 * ot + j) as u32;
             }
         }
     }
-    Ok(Triangulation { triangles, halfedges })
+    Ok(Triangulation {
+        triangles,
+        halfedges,
+    })
 }

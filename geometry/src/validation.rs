@@ -53,7 +53,11 @@ pub fn locate_in_ring(ring: &[[f64; 2]], p: [f64; 2]) -> Location {
             inside = !inside;
         }
     }
-    if inside { Location::Inside } else { Location::Outside }
+    if inside {
+        Location::Inside
+    } else {
+        Location::Outside
+    }
 }
 
 /// OGC validity of a polygon with holes, in the orientation convention of [`Polygon`]:
@@ -67,14 +71,18 @@ pub fn locate_in_ring(ring: &[[f64; 2]], p: [f64; 2]) -> Location {
 /// Not checked: that touching points leave the interior connected.
 pub fn check_polygon(polygon: &Polygon) -> Result<(), GeometryError> {
     let bad = |reason: String| Err(GeometryError::InvalidPolygon { reason });
-    let rings: Vec<&Vec<[f64; 2]>> =
-        std::iter::once(&polygon.shell).chain(polygon.holes.iter()).collect();
+    let rings: Vec<&Vec<[f64; 2]>> = std::iter::once(&polygon.shell)
+        .chain(polygon.holes.iter())
+        .collect();
     for (r, ring) in rings.iter().enumerate() {
         let name = ring_name(r);
         if ring.len() < 3 {
             return bad(format!("{name} has {} vertices", ring.len()));
         }
-        if let Some(p) = ring.iter().find(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        if let Some(p) = ring
+            .iter()
+            .find(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
             return bad(format!("{name} has a non-finite vertex {p:?}"));
         }
         let mut sorted = (*ring).clone();
@@ -119,31 +127,46 @@ pub fn check_detection(detection: &Detection) -> Result<(), GeometryError> {
             return bad(format!("site {i} has rank {}", site.rank));
         }
         if !(site.safe_radius_m >= 0.0 && site.safe_radius_m <= previous) {
-            return bad(format!("site {i} radius {} out of order", site.safe_radius_m));
+            return bad(format!(
+                "site {i} radius {} out of order",
+                site.safe_radius_m
+            ));
         }
         previous = site.safe_radius_m;
         let c = [site.center[0], site.center[1]];
         let d = site.polygon.signed_distance(c);
         if d < site.safe_radius_m - 1e-6 * (1.0 + site.safe_radius_m) {
-            return bad(format!("site {i} centre is {d} from the boundary, radius {}", site.safe_radius_m));
+            return bad(format!(
+                "site {i} centre is {d} from the boundary, radius {}",
+                site.safe_radius_m
+            ));
         }
         let n = site.normal;
         let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
         if !((len - 1.0).abs() < 1e-9 && n[2] > 0.0) {
-            return bad(format!("site {i} normal {n:?} is not a unit vector pointing up"));
+            return bad(format!(
+                "site {i} normal {n:?} is not a unit vector pointing up"
+            ));
         }
         if !(site.center.iter().all(|v| v.is_finite()) && site.plane_height_m.is_finite()) {
             return bad(format!("site {i} has a non-finite centre or height"));
         }
         if (site.area_m2 - site.polygon.area()).abs() > 1e-6 * (1.0 + site.area_m2) {
-            return bad(format!("site {i} area {} is not its polygon's", site.area_m2));
+            return bad(format!(
+                "site {i} area {} is not its polygon's",
+                site.area_m2
+            ));
         }
     }
     Ok(())
 }
 
 fn ring_name(r: usize) -> String {
-    if r == 0 { "shell".into() } else { format!("hole {}", r - 1) }
+    if r == 0 {
+        "shell".into()
+    } else {
+        format!("hole {}", r - 1)
+    }
 }
 
 /// Location of `ring` relative to `other`, judged at a vertex (or, if all lie on `other`'s boundary,
@@ -186,7 +209,12 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
             let (a, b) = (ring[i], ring[(i + 1) % n]);
             lo = [lo[0].min(a[0]), lo[1].min(a[1])];
             hi = [hi[0].max(a[0]), hi[1].max(a[1])];
-            segs.push(Seg { ring: r, index: i, a, b });
+            segs.push(Seg {
+                ring: r,
+                index: i,
+                a,
+                b,
+            });
         }
     }
     let lens: Vec<usize> = rings.iter().map(|r| r.len()).collect();
@@ -196,8 +224,14 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
     let index = |v: f64, o: f64| (((v - o) / cell) as usize).min(cells_per_side - 1);
     let mut grid: Vec<Vec<u32>> = vec![Vec::new(); cells_per_side * cells_per_side];
     for (k, s) in segs.iter().enumerate() {
-        let (x0, x1) = (index(s.a[0].min(s.b[0]), lo[0]), index(s.a[0].max(s.b[0]), lo[0]));
-        let (y0, y1) = (index(s.a[1].min(s.b[1]), lo[1]), index(s.a[1].max(s.b[1]), lo[1]));
+        let (x0, x1) = (
+            index(s.a[0].min(s.b[0]), lo[0]),
+            index(s.a[0].max(s.b[0]), lo[0]),
+        );
+        let (y0, y1) = (
+            index(s.a[1].min(s.b[1]), lo[1]),
+            index(s.a[1].max(s.b[1]), lo[1]),
+        );
         for x in x0..=x1 {
             for y in y0..=y1 {
                 grid[y * cells_per_side + x].push(k as u32);
@@ -241,7 +275,11 @@ fn check_pair(s: &Seg, t: &Seg, lens: &[usize]) -> Result<(), GeometryError> {
     let collinear = o1 == 0.0 && o2 == 0.0;
     if collinear {
         // Overlap of more than a point along the common line?
-        let axis = if (s.a[0] - s.b[0]).abs() >= (s.a[1] - s.b[1]).abs() { 0 } else { 1 };
+        let axis = if (s.a[0] - s.b[0]).abs() >= (s.a[1] - s.b[1]).abs() {
+            0
+        } else {
+            1
+        };
         let (s0, s1) = (s.a[axis].min(s.b[axis]), s.a[axis].max(s.b[axis]));
         let (t0, t1) = (t.a[axis].min(t.b[axis]), t.a[axis].max(t.b[axis]));
         if s0.max(t0) < s1.min(t1) {
@@ -283,7 +321,10 @@ mod tests {
 
     #[test]
     fn a_square_with_a_hole_is_valid() {
-        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![cw(square(2.0, 2.0, 2.0))] };
+        let p = Polygon {
+            shell: square(0.0, 0.0, 10.0),
+            holes: vec![cw(square(2.0, 2.0, 2.0))],
+        };
         check_polygon(&p).unwrap();
         assert_eq!(p.area(), 96.0);
     }
@@ -291,7 +332,10 @@ mod tests {
     #[test]
     fn holes_may_touch_the_shell_and_each_other_at_a_point() {
         let touching_shell = vec![[0.0, 5.0], [2.0, 6.0], [2.0, 4.0]];
-        let p = Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![touching_shell] };
+        let p = Polygon {
+            shell: square(0.0, 0.0, 10.0),
+            holes: vec![touching_shell],
+        };
         check_polygon(&p).unwrap();
         let p = Polygon {
             shell: square(0.0, 0.0, 10.0),
@@ -303,30 +347,61 @@ mod tests {
     #[test]
     fn invalid_polygons_are_caught() {
         let cases: Vec<(&str, Polygon)> = vec![
-            ("clockwise shell", Polygon { shell: cw(square(0.0, 0.0, 1.0)), holes: vec![] }),
-            ("two points", Polygon { shell: vec![[0.0, 0.0], [1.0, 0.0]], holes: vec![] }),
+            (
+                "clockwise shell",
+                Polygon {
+                    shell: cw(square(0.0, 0.0, 1.0)),
+                    holes: vec![],
+                },
+            ),
+            (
+                "two points",
+                Polygon {
+                    shell: vec![[0.0, 0.0], [1.0, 0.0]],
+                    holes: vec![],
+                },
+            ),
             (
                 "bow tie",
-                Polygon { shell: vec![[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]], holes: vec![] },
+                Polygon {
+                    shell: vec![[0.0, 0.0], [1.0, 1.0], [1.0, 0.0], [0.0, 1.0]],
+                    holes: vec![],
+                },
             ),
             (
                 "ring through a vertex twice",
                 Polygon {
-                    shell: vec![[0.0, 0.0], [2.0, 0.0], [1.0, 1.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]],
+                    shell: vec![
+                        [0.0, 0.0],
+                        [2.0, 0.0],
+                        [1.0, 1.0],
+                        [2.0, 2.0],
+                        [0.0, 2.0],
+                        [1.0, 1.0],
+                    ],
                     holes: vec![],
                 },
             ),
             (
                 "counter-clockwise hole",
-                Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![square(2.0, 2.0, 2.0)] },
+                Polygon {
+                    shell: square(0.0, 0.0, 10.0),
+                    holes: vec![square(2.0, 2.0, 2.0)],
+                },
             ),
             (
                 "hole outside",
-                Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![cw(square(20.0, 2.0, 2.0))] },
+                Polygon {
+                    shell: square(0.0, 0.0, 10.0),
+                    holes: vec![cw(square(20.0, 2.0, 2.0))],
+                },
             ),
             (
                 "hole crossing the shell",
-                Polygon { shell: square(0.0, 0.0, 10.0), holes: vec![cw(square(9.0, 2.0, 2.0))] },
+                Polygon {
+                    shell: square(0.0, 0.0, 10.0),
+                    holes: vec![cw(square(9.0, 2.0, 2.0))],
+                },
             ),
             (
                 "nested holes",
@@ -344,7 +419,10 @@ mod tests {
             ),
             (
                 "NaN",
-                Polygon { shell: vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]], holes: vec![] },
+                Polygon {
+                    shell: vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]],
+                    holes: vec![],
+                },
             ),
         ];
         for (name, p) in cases {

@@ -23,7 +23,9 @@ fn scene(params: &SceneParams, seed: u64) -> (Scene, Detection) {
 
 fn strictly_inside(p: &Polygon, q: [f64; 2]) -> bool {
     locate_in_ring(&p.shell, q) == Location::Inside
-        && p.holes.iter().all(|h| locate_in_ring(h, q) == Location::Outside)
+        && p.holes
+            .iter()
+            .all(|h| locate_in_ring(h, q) == Location::Outside)
 }
 
 /// A triangular lattice (unique Delaunay triangulation: no four points are cocircular) of flat
@@ -49,7 +51,10 @@ fn lattice(cols: usize, rows: usize, obstacles: &[(usize, usize)]) -> (Vec<[f32;
 
 fn lattice_xy(i: usize, j: usize) -> [f64; 2] {
     let h = 3f64.sqrt() / 2.0;
-    [f64::from((i as f64 + 0.5 * (j % 2) as f64) as f32), f64::from((j as f64 * h) as f32)]
+    [
+        f64::from((i as f64 + 0.5 * (j % 2) as f64) as f32),
+        f64::from((j as f64 * h) as f32),
+    ]
 }
 
 #[test]
@@ -83,7 +88,11 @@ fn two_roofs_at_different_heights_side_by_side() {
     for gap in [0.0, 3.0] {
         let params = SceneParams {
             point_count: 3000,
-            second_roof: Some(SecondRoof { size_m: [15.0, 20.0], height_m: 14.0, gap_m: gap }),
+            second_roof: Some(SecondRoof {
+                size_m: [15.0, 20.0],
+                height_m: 14.0,
+                gap_m: gap,
+            }),
             obstacles: 0,
             ..SceneParams::default()
         };
@@ -91,7 +100,10 @@ fn two_roofs_at_different_heights_side_by_side() {
         assert_eq!(d.sites.len(), 2, "gap {gap}");
         let mut heights: Vec<f64> = d.sites.iter().map(|s| s.plane_height_m).collect();
         heights.sort_by(f64::total_cmp);
-        assert!((heights[0] - 10.0).abs() < 0.05 && (heights[1] - 14.0).abs() < 0.05, "{heights:?}");
+        assert!(
+            (heights[0] - 10.0).abs() < 0.05 && (heights[1] - 14.0).abs() < 0.05,
+            "{heights:?}"
+        );
         // The wider roof ranks first.
         assert!((d.sites[0].plane_height_m - 10.0).abs() < 0.05);
     }
@@ -100,11 +112,23 @@ fn two_roofs_at_different_heights_side_by_side() {
 #[test]
 fn sloped_roof_is_rejected_by_dot_min() {
     // dz/dx = 0.5: |n·k| = 0.89 < 0.96.
-    let params = SceneParams { roof_slope: 0.5, obstacles: 0, ..SceneParams::default() };
+    let params = SceneParams {
+        roof_slope: 0.5,
+        obstacles: 0,
+        ..SceneParams::default()
+    };
     let (_, d) = scene(&params, 2);
-    assert!(d.sites.is_empty(), "{:?}", d.sites.iter().map(|s| s.plane_height_m).collect::<Vec<_>>());
+    assert!(
+        d.sites.is_empty(),
+        "{:?}",
+        d.sites.iter().map(|s| s.plane_height_m).collect::<Vec<_>>()
+    );
     // A gentle slope (dz/dx = 0.1, |n·k| = 0.995) is landable.
-    let params = SceneParams { roof_slope: 0.1, obstacles: 0, ..SceneParams::default() };
+    let params = SceneParams {
+        roof_slope: 0.1,
+        obstacles: 0,
+        ..SceneParams::default()
+    };
     let (_, d) = scene(&params, 2);
     assert_eq!(d.sites.len(), 1);
     let n = d.sites[0].normal;
@@ -124,22 +148,36 @@ fn courtyard_becomes_a_hole() {
     assert_eq!(d.sites.len(), 1);
     let site = &d.sites[0];
     assert_eq!(site.polygon.holes.len(), 1);
-    assert_eq!(locate_in_ring(&site.polygon.holes[0], [12.0, 12.0]), Location::Inside);
+    assert_eq!(
+        locate_in_ring(&site.polygon.holes[0], [12.0, 12.0]),
+        Location::Inside
+    );
     // The best circle sits in a corner strip: about (24 - 8) / 4 = 4 m from the walls.
-    assert!(site.safe_radius_m > 3.0 && site.safe_radius_m < 5.5, "{}", site.safe_radius_m);
+    assert!(
+        site.safe_radius_m > 3.0 && site.safe_radius_m < 5.5,
+        "{}",
+        site.safe_radius_m
+    );
     assert!(site.area_m2 > 0.8 * (24.0 * 24.0 - 64.0) && site.area_m2 < 24.0 * 24.0 - 64.0);
 }
 
 #[test]
 fn without_classes_obstacle_tops_are_their_own_sites() {
-    let params = SceneParams { obstacles: 2, obstacle_side_m: [2.5, 3.0], ..SceneParams::default() };
+    let params = SceneParams {
+        obstacles: 2,
+        obstacle_side_m: [2.5, 3.0],
+        ..SceneParams::default()
+    };
     let s = Scene::generate(&params, 4);
     let d = run(&s.points, None, &Params::default());
     // Ground, roof and the flat tops are all candidates; the roof has the largest circle.
     assert!((d.sites[0].plane_height_m - 10.0).abs() < 0.05);
     for o in &s.truth.obstacles {
         let c = [(o.min[0] + o.max[0]) / 2.0, (o.min[1] + o.max[1]) / 2.0];
-        assert!(!strictly_inside(&d.sites[0].polygon, c), "obstacle {o:?} inside the roof site");
+        assert!(
+            !strictly_inside(&d.sites[0].polygon, c),
+            "obstacle {o:?} inside the roof site"
+        );
     }
 }
 
@@ -148,7 +186,11 @@ fn degenerate_inputs_give_empty_results_or_typed_errors() {
     let p = Params::default();
     assert!(run(&[], None, &p).sites.is_empty());
     assert!(run(&[[0.0, 0.0, 0.0]], None, &p).sites.is_empty());
-    assert!(run(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]], None, &p).sites.is_empty());
+    assert!(
+        run(&[[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]], None, &p)
+            .sites
+            .is_empty()
+    );
     let line: Vec<[f32; 3]> = (0..100).map(|i| [i as f32, 0.5 * i as f32, 0.0]).collect();
     let d = run(&line, None, &p);
     assert!(d.sites.is_empty() && d.triangle_count == 0 && d.point_count == 100);
@@ -156,33 +198,117 @@ fn degenerate_inputs_give_empty_results_or_typed_errors() {
 
     let mut bad = vec![[0.0f32, 0.0, 0.0]; 10];
     bad[7][2] = f32::NAN;
-    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    assert!(matches!(
+        detect(&bad, None, &p),
+        Err(GeometryError::InvalidPoint { index: 7, .. })
+    ));
     bad[7] = [f32::INFINITY, 0.0, 0.0];
-    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    assert!(matches!(
+        detect(&bad, None, &p),
+        Err(GeometryError::InvalidPoint { index: 7, .. })
+    ));
     bad[7] = [0.0, -2e7, 0.0];
-    assert!(matches!(detect(&bad, None, &p), Err(GeometryError::InvalidPoint { index: 7, .. })));
+    assert!(matches!(
+        detect(&bad, None, &p),
+        Err(GeometryError::InvalidPoint { index: 7, .. })
+    ));
     bad[7] = [0.0, 0.0, 0.0];
     assert!(matches!(
         detect(&bad, Some(&[4; 9]), &p),
-        Err(GeometryError::ClassCountMismatch { points: 10, classes: 9 })
+        Err(GeometryError::ClassCountMismatch {
+            points: 10,
+            classes: 9
+        })
     ));
 }
 
 #[test]
 fn parameters_are_validated_with_field_names() {
     let cases: Vec<(&str, Params)> = vec![
-        ("l_max_m", Params { l_max_m: 0.0, ..Params::default() }),
-        ("l_max_m", Params { l_max_m: f64::NAN, ..Params::default() }),
-        ("dot_min", Params { dot_min: 1.0, ..Params::default() }),
-        ("dot_min", Params { dot_min: -0.1, ..Params::default() }),
-        ("z_min_m", Params { z_min_m: -1.0, ..Params::default() }),
-        ("landable_classes", Params { landable_classes: vec![4, 15], ..Params::default() }),
-        ("polylabel_precision_m", Params { polylabel_precision_m: 0.0, ..Params::default() }),
-        ("polylabel_precision_m", Params { polylabel_precision_m: 1e-9, ..Params::default() }),
-        ("min_safe_radius_m", Params { min_safe_radius_m: f64::INFINITY, ..Params::default() }),
-        ("min_area_m2", Params { min_area_m2: -1.0, ..Params::default() }),
-        ("min_hole_area_m2", Params { min_hole_area_m2: f64::NAN, ..Params::default() }),
-        ("max_sites", Params { max_sites: 0, ..Params::default() }),
+        (
+            "l_max_m",
+            Params {
+                l_max_m: 0.0,
+                ..Params::default()
+            },
+        ),
+        (
+            "l_max_m",
+            Params {
+                l_max_m: f64::NAN,
+                ..Params::default()
+            },
+        ),
+        (
+            "dot_min",
+            Params {
+                dot_min: 1.0,
+                ..Params::default()
+            },
+        ),
+        (
+            "dot_min",
+            Params {
+                dot_min: -0.1,
+                ..Params::default()
+            },
+        ),
+        (
+            "z_min_m",
+            Params {
+                z_min_m: -1.0,
+                ..Params::default()
+            },
+        ),
+        (
+            "landable_classes",
+            Params {
+                landable_classes: vec![4, 15],
+                ..Params::default()
+            },
+        ),
+        (
+            "polylabel_precision_m",
+            Params {
+                polylabel_precision_m: 0.0,
+                ..Params::default()
+            },
+        ),
+        (
+            "polylabel_precision_m",
+            Params {
+                polylabel_precision_m: 1e-9,
+                ..Params::default()
+            },
+        ),
+        (
+            "min_safe_radius_m",
+            Params {
+                min_safe_radius_m: f64::INFINITY,
+                ..Params::default()
+            },
+        ),
+        (
+            "min_area_m2",
+            Params {
+                min_area_m2: -1.0,
+                ..Params::default()
+            },
+        ),
+        (
+            "min_hole_area_m2",
+            Params {
+                min_hole_area_m2: f64::NAN,
+                ..Params::default()
+            },
+        ),
+        (
+            "max_sites",
+            Params {
+                max_sites: 0,
+                ..Params::default()
+            },
+        ),
     ];
     for (field, params) in cases {
         match detect(&[], None, &params) {
@@ -199,32 +325,67 @@ fn parameters_are_validated_with_field_names() {
 #[test]
 fn filters_and_limits() {
     let params = SceneParams {
-        second_roof: Some(SecondRoof { size_m: [8.0, 8.0], height_m: 13.0, gap_m: 2.0 }),
+        second_roof: Some(SecondRoof {
+            size_m: [8.0, 8.0],
+            height_m: 13.0,
+            gap_m: 2.0,
+        }),
         point_count: 3000,
         ..SceneParams::default()
     };
     let s = Scene::generate(&params, 8);
     let all = run(&s.points, Some(&s.classes), &Params::default());
     assert!(all.sites.len() >= 2);
-    let one = run(&s.points, Some(&s.classes), &Params { max_sites: 1, ..Params::default() });
+    let one = run(
+        &s.points,
+        Some(&s.classes),
+        &Params {
+            max_sites: 1,
+            ..Params::default()
+        },
+    );
     assert_eq!(one.sites.len(), 1);
     assert_eq!(one.sites[0], all.sites[0]);
     let r = all.sites[1].safe_radius_m;
-    let big = run(&s.points, Some(&s.classes), &Params { min_safe_radius_m: r + 0.01, ..Params::default() });
+    let big = run(
+        &s.points,
+        Some(&s.classes),
+        &Params {
+            min_safe_radius_m: r + 0.01,
+            ..Params::default()
+        },
+    );
     assert_eq!(big.sites.len(), 1);
     let a = all.sites[0].area_m2;
-    let none = run(&s.points, Some(&s.classes), &Params { min_area_m2: a + 1.0, ..Params::default() });
+    let none = run(
+        &s.points,
+        Some(&s.classes),
+        &Params {
+            min_area_m2: a + 1.0,
+            ..Params::default()
+        },
+    );
     assert!(none.sites.is_empty());
     // Dropping every hole gives a polygon without holes and a radius at least as large.
-    let no_holes =
-        run(&s.points, Some(&s.classes), &Params { min_hole_area_m2: 1e6, ..Params::default() });
+    let no_holes = run(
+        &s.points,
+        Some(&s.classes),
+        &Params {
+            min_hole_area_m2: 1e6,
+            ..Params::default()
+        },
+    );
     assert!(no_holes.sites.iter().all(|s| s.polygon.holes.is_empty()));
     assert!(no_holes.sites[0].safe_radius_m >= all.sites[0].safe_radius_m - 0.5);
 }
 
 #[test]
 fn results_are_deterministic_and_triangulator_independent() {
-    let params = SceneParams { obstacles: 5, point_count: 4000, ..SceneParams::default() };
+    let params = SceneParams {
+        obstacles: 5,
+        point_count: 4000,
+        ..SceneParams::default()
+    };
     let s = Scene::generate(&params, 21);
     let strip = |mut d: Detection| {
         d.timings = Default::default();
@@ -233,7 +394,9 @@ fn results_are_deterministic_and_triangulator_independent() {
     let a = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
     let b = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
     assert_eq!(a, b);
-    let spade = TriangulationConfig { triangulator: Triangulator::Spade };
+    let spade = TriangulationConfig {
+        triangulator: Triangulator::Spade,
+    };
     let c = strip(detect_with(&s.points, Some(&s.classes), &Params::default(), &spade).unwrap());
     // Jittered points are in general position: the same Delaunay triangulation, so the same
     // polygons (canonical rings) and radii, whatever the triangle numbering.
@@ -294,20 +457,37 @@ fn property_random_roofs_with_obstacles() {
             let p = &site.polygon;
             let c = [site.center[0], site.center[1]];
             for &q in &obstacle_points {
-                assert!(!strictly_inside(p, q), "case {case}: obstacle point {q:?} inside a site");
+                assert!(
+                    !strictly_inside(p, q),
+                    "case {case}: obstacle point {q:?} inside a site"
+                );
                 let dist = (q[0] - c[0]).hypot(q[1] - c[1]);
-                assert!(dist >= site.safe_radius_m - 1e-9, "case {case}: obstacle point in circle");
+                assert!(
+                    dist >= site.safe_radius_m - 1e-9,
+                    "case {case}: obstacle point in circle"
+                );
             }
             // The sampled boundary lies between roof and obstacle samples, so the true box edge
             // can be up to one point spacing inside the circle; never more.
             for o in &s.truth.obstacles {
                 let dist = o.distance(c[0], c[1]);
-                assert!(dist >= site.safe_radius_m - s.spacing_m, "case {case}: box {o:?}");
+                assert!(
+                    dist >= site.safe_radius_m - s.spacing_m,
+                    "case {case}: box {o:?}"
+                );
             }
             let step = 0.2;
             let best = grid_optimum(p, step);
-            assert!(site.safe_radius_m >= best - precision - 1e-9, "case {case}: {} vs grid {best}", site.safe_radius_m);
-            assert!(site.safe_radius_m <= best + step * 0.7072, "case {case}: {} vs grid {best}", site.safe_radius_m);
+            assert!(
+                site.safe_radius_m >= best - precision - 1e-9,
+                "case {case}: {} vs grid {best}",
+                site.safe_radius_m
+            );
+            assert!(
+                site.safe_radius_m <= best + step * 0.7072,
+                "case {case}: {} vs grid {best}",
+                site.safe_radius_m
+            );
         }
     }
 }

@@ -2,10 +2,18 @@
 //! (many cocircular points), collinear and duplicate-heavy input.
 
 use landing_geometry::synthetic::Pcg32;
-use landing_geometry::{Triangulation, TriangulationConfig, Triangulator, triangulation::triangulate};
+use landing_geometry::{
+    Triangulation, TriangulationConfig, Triangulator, triangulation::triangulate,
+};
 
 fn run(points: &[[f64; 3]], which: Triangulator) -> Triangulation {
-    triangulate(points, &TriangulationConfig { triangulator: which }).unwrap()
+    triangulate(
+        points,
+        &TriangulationConfig {
+            triangulator: which,
+        },
+    )
+    .unwrap()
 }
 
 fn xy(points: &[[f64; 3]]) -> Vec<[f64; 2]> {
@@ -14,7 +22,10 @@ fn xy(points: &[[f64; 3]]) -> Vec<[f64; 2]> {
 
 /// Number of distinct x/y positions.
 fn distinct(points: &[[f64; 3]]) -> usize {
-    let mut v: Vec<(u64, u64)> = points.iter().map(|p| ((p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits())).collect();
+    let mut v: Vec<(u64, u64)> = points
+        .iter()
+        .map(|p| ((p[0] + 0.0).to_bits(), (p[1] + 0.0).to_bits()))
+        .collect();
     v.sort_unstable();
     v.dedup();
     v.len()
@@ -24,30 +35,46 @@ fn distinct(points: &[[f64; 3]]) -> usize {
 /// count with spade's.
 fn check(points: &[[f64; 3]], what: &str) -> Triangulation {
     let ours = run(points, Triangulator::SweepHull);
-    ours.check_invariants(&xy(points), true).unwrap_or_else(|e| panic!("{what}: {e}"));
+    ours.check_invariants(&xy(points), true)
+        .unwrap_or_else(|e| panic!("{what}: {e}"));
     let spade = run(points, Triangulator::Spade);
-    spade.check_invariants(&xy(points), true).unwrap_or_else(|e| panic!("{what} (spade): {e}"));
-    assert_eq!(ours.len(), spade.len(), "{what}: triangle counts differ from spade");
+    spade
+        .check_invariants(&xy(points), true)
+        .unwrap_or_else(|e| panic!("{what} (spade): {e}"));
+    assert_eq!(
+        ours.len(),
+        spade.len(),
+        "{what}: triangle counts differ from spade"
+    );
     if !ours.is_empty() {
         let mut used = vec![false; points.len()];
         for &v in &ours.triangles {
             used[v as usize] = true;
         }
-        assert_eq!(used.iter().filter(|&&u| u).count(), distinct(points), "{what}: points left out");
+        assert_eq!(
+            used.iter().filter(|&&u| u).count(),
+            distinct(points),
+            "{what}: points left out"
+        );
     }
     ours
 }
 
 fn random(n: usize, seed: u64, scale: f64) -> Vec<[f64; 3]> {
     let mut g = Pcg32::new(seed);
-    (0..n).map(|_| [g.range(-scale, scale), g.range(-scale, scale), g.unit()]).collect()
+    (0..n)
+        .map(|_| [g.range(-scale, scale), g.range(-scale, scale), g.unit()])
+        .collect()
 }
 
 #[test]
 fn random_points_match_spade() {
     for seed in 0..40 {
         let n = 3 + (seed as usize * 37) % 2000;
-        check(&random(n, seed, 100.0), &format!("random n={n} seed={seed}"));
+        check(
+            &random(n, seed, 100.0),
+            &format!("random n={n} seed={seed}"),
+        );
     }
 }
 
@@ -109,12 +136,21 @@ fn degenerate_inputs() {
     assert!(run(&[], Triangulator::SweepHull).is_empty());
     assert!(run(&[[0.0, 0.0, 0.0]], Triangulator::SweepHull).is_empty());
     assert!(run(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], Triangulator::SweepHull).is_empty());
-    let collinear: Vec<[f64; 3]> = (0..100).map(|i| [f64::from(i), 2.0 * f64::from(i), 0.0]).collect();
+    let collinear: Vec<[f64; 3]> = (0..100)
+        .map(|i| [f64::from(i), 2.0 * f64::from(i), 0.0])
+        .collect();
     assert!(check(&collinear, "collinear").is_empty());
     let same = vec![[3.0, 4.0, 0.0]; 50];
     assert!(check(&same, "all duplicates").is_empty());
-    let two_spots: Vec<[f64; 3]> =
-        (0..50).map(|i| if i % 2 == 0 { [0.0, 0.0, 0.0] } else { [1.0, 1.0, 0.0] }).collect();
+    let two_spots: Vec<[f64; 3]> = (0..50)
+        .map(|i| {
+            if i % 2 == 0 {
+                [0.0, 0.0, 0.0]
+            } else {
+                [1.0, 1.0, 0.0]
+            }
+        })
+        .collect();
     assert!(check(&two_spots, "two spots").is_empty());
     // Collinear plus one point off the line: a fan.
     let mut fan = collinear.clone();
@@ -127,11 +163,15 @@ fn duplicate_heavy_input() {
     for seed in 0..10 {
         let base = random(200, seed, 10.0);
         let mut g = Pcg32::new(seed + 100);
-        let pts: Vec<[f64; 3]> = (0..2000).map(|_| base[(g.next_u32() % 200) as usize]).collect();
+        let pts: Vec<[f64; 3]> = (0..2000)
+            .map(|_| base[(g.next_u32() % 200) as usize])
+            .collect();
         check(&pts, &format!("duplicates seed {seed}"));
         // Also snapped to a coarse lattice: duplicates, collinear and cocircular at once.
-        let snapped: Vec<[f64; 3]> =
-            random(1500, seed, 5.0).iter().map(|p| [p[0].round(), p[1].round(), 0.0]).collect();
+        let snapped: Vec<[f64; 3]> = random(1500, seed, 5.0)
+            .iter()
+            .map(|p| [p[0].round(), p[1].round(), 0.0])
+            .collect();
         check(&snapped, &format!("snapped seed {seed}"));
     }
 }
@@ -142,7 +182,11 @@ fn scan_like_rows() {
     let mut pts = Vec::new();
     for r in 0..60 {
         for c in 0..80 {
-            pts.push([f64::from(c) * 0.1 + f64::from(r % 2) * 0.05, f64::from(r) * 0.2, 0.0]);
+            pts.push([
+                f64::from(c) * 0.1 + f64::from(r % 2) * 0.05,
+                f64::from(r) * 0.2,
+                0.0,
+            ]);
         }
         pts.push([7.9, f64::from(r) * 0.2, 0.0]);
     }

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +46,9 @@ def export(net, ckpt, out: Path, name: str) -> None:
     example = torch.zeros(1, 3, h, w)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_suffix(".tmp.onnx")
+    # The TorchScript exporter is deprecated but gives a plain, well-optimised graph with dynamic
+    # H and W and no onnxscript dependency; its deprecation warning is noise here.
+    warnings.filterwarnings("ignore", category=DeprecationWarning)
     torch.onnx.export(
         wrapper,
         (example,),

@@ -65,6 +65,8 @@ def main(argv=None) -> int:
     p.add_argument("--lr", type=float, default=3e-3)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--init", help="start from this checkpoint's weights (fine-tuning) instead of "
+                                  "from scratch")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     args = p.parse_args(argv)
 
@@ -83,6 +85,12 @@ def main(argv=None) -> int:
     print("class weights:", [round(float(x), 2) for x in weights], flush=True)
 
     net = build(args.arch, args.width)
+    prior = None
+    if args.init:
+        prior = torch.load(args.init, map_location="cpu", weights_only=False)
+        if prior["arch"] != args.arch or prior["width"] != args.width:
+            raise SystemExit(f"--init {args.init} is {prior['arch']} x{prior['width']}")
+        net.load_state_dict(prior["state_dict"])
     print(f"{args.arch}: {count_parameters(net)} parameters", flush=True)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
 
@@ -171,6 +179,8 @@ def main(argv=None) -> int:
             "final_loss": loss_avg,
             "command": " ".join([os.path.relpath(sys.argv[0])] + (argv or sys.argv[1:])),
             "torch": torch.__version__,
+            "init": args.init,
+            "previous": prior["training"] if prior else None,
         },
     }
     tmp = out.with_suffix(".tmp")

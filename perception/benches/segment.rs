@@ -50,7 +50,11 @@ fn scene(width: u32, height: u32) -> (CameraModel, Vec<[f32; 3]>) {
     let points = (0..20_000)
         .map(|_| {
             let z: f32 = rng.random_range(5.0..40.0);
-            [z * rng.random_range(-0.8..0.8), z * rng.random_range(-0.6..0.6), z]
+            [
+                z * rng.random_range(-0.8..0.8),
+                z * rng.random_range(-0.6..0.6),
+                z,
+            ]
         })
         .collect();
     (camera, points)

@@ -67,19 +67,18 @@ impl CameraModel {
     /// camera (`z <= 0` in the camera frame). The result may lie outside the image.
     pub fn project(&self, point_world: &Point3<f64>) -> Option<(f64, f64)> {
         let p = self.pose.inverse_transform_point(point_world);
-        (p.z > 0.0).then(|| {
-            (
-                self.fx * p.x / p.z + self.cx,
-                self.fy * p.y / p.z + self.cy,
-            )
-        })
+        (p.z > 0.0).then(|| (self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy))
     }
 }
 
 /// The class of every world point as seen in `mask`: each point is moved into the camera frame,
 /// projected with the intrinsics, and looked up in the mask stretched over the camera's image.
 /// Points behind the camera, outside the image, or not finite get `0` (unknown).
-pub fn classify_points(points_world: &[[f32; 3]], camera: &CameraModel, mask: &ClassMask) -> Vec<u8> {
+pub fn classify_points(
+    points_world: &[[f32; 3]],
+    camera: &CameraModel,
+    mask: &ClassMask,
+) -> Vec<u8> {
     // One matrix product per point: world → camera is the inverse pose.
     let world_to_camera = camera.pose.inverse().to_homogeneous();
     let r = world_to_camera.fixed_view::<3, 3>(0, 0);
@@ -89,7 +88,8 @@ pub fn classify_points(points_world: &[[f32; 3]], camera: &CameraModel, mask: &C
         .map(|p| {
             let pw = nalgebra::Vector3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
             let pc = r * pw + t;
-            if !(pc.z > 0.0) {
+            // NaN fails this test too, so non-finite points come out unknown.
+            if pc.z.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 return 0;
             }
             let u = camera.fx * pc.x / pc.z + camera.cx;
@@ -144,7 +144,10 @@ mod tests {
             [100.0, 0.0, 0.0], // far outside the image
             [f32::NAN, 0.0, 0.0],
         ];
-        assert_eq!(classify_points(&points, &cam, &mask), vec![1, 2, 3, 4, 0, 0, 0]);
+        assert_eq!(
+            classify_points(&points, &cam, &mask),
+            vec![1, 2, 3, 4, 0, 0, 0]
+        );
     }
 
     #[test]

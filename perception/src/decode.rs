@@ -90,7 +90,12 @@ fn decode_encoded(
     Ok(image.into_rgb8())
 }
 
-fn decode_raw(width: u32, height: u32, step: u32, data: &[u8]) -> Result<RgbImage, PerceptionError> {
+fn decode_raw(
+    width: u32,
+    height: u32,
+    step: u32,
+    data: &[u8],
+) -> Result<RgbImage, PerceptionError> {
     if width == 0 || width > MAX_IMAGE_SIDE {
         return Err(PerceptionError::invalid_input(
             "raw.width",

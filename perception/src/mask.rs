@@ -128,6 +128,20 @@ pub struct IouReport {
     pub mean: f64,
     /// Pixel accuracy over the pixels whose truth is not unknown.
     pub pixel_accuracy: f64,
+    /// Number of truth pixels of each class.
+    pub truth_pixels: [u64; NUM_CLASSES],
+}
+
+impl IouReport {
+    /// Mean IoU over the classes with at least `min_pixels` truth pixels: on a handful of frames,
+    /// a class with a few dozen pixels makes the plain mean mostly noise.
+    pub fn mean_over_classes_with(&self, min_pixels: u64) -> Option<f64> {
+        let vals: Vec<f64> = (1..NUM_CLASSES)
+            .filter(|&c| self.truth_pixels[c] >= min_pixels)
+            .filter_map(|c| self.per_class[c])
+            .collect();
+        (!vals.is_empty()).then(|| vals.iter().sum::<f64>() / vals.len() as f64)
+    }
 }
 
 /// IoU of `predicted` against `truth` (same size). Pixels whose truth is `0` are ignored.
@@ -173,6 +187,7 @@ impl Confusion {
     /// Per-class and mean IoU of everything added so far.
     pub fn report(&self) -> IouReport {
         let mut per_class = [None; NUM_CLASSES];
+        let mut truth_pixels = [0u64; NUM_CLASSES];
         let mut correct = 0u64;
         let mut total = 0u64;
         for c in 1..NUM_CLASSES {
@@ -183,6 +198,7 @@ impl Confusion {
             if union > 0 {
                 per_class[c] = Some(tp as f64 / union as f64);
             }
+            truth_pixels[c] = truth_c;
             correct += tp;
             total += truth_c;
         }
@@ -200,6 +216,7 @@ impl Confusion {
             } else {
                 correct as f64 / total as f64
             },
+            truth_pixels,
         }
     }
 }
@@ -235,9 +252,15 @@ mod tests {
         let r = iou(&pred, &truth).unwrap();
         assert_eq!(r.per_class[4], Some(0.5));
         assert_eq!(r.per_class[1], Some(0.5));
-        assert_eq!(r.per_class[3], None, "a prediction on an unknown pixel is ignored");
+        assert_eq!(
+            r.per_class[3], None,
+            "a prediction on an unknown pixel is ignored"
+        );
         assert!((r.mean - 0.5).abs() < 1e-12);
         assert!((r.pixel_accuracy - 2.0 / 3.0).abs() < 1e-12);
+        assert_eq!(r.truth_pixels[4], 2);
+        assert_eq!(r.mean_over_classes_with(2), Some(0.5));
+        assert_eq!(r.mean_over_classes_with(3), None);
     }
 
     #[test]

@@ -106,14 +106,14 @@ impl SegmenterConfig {
                 reason: "must be in 1..=64",
             });
         }
-        if let Some((w, h)) = self.input_size {
-            if !(32..=4096).contains(&w) || !(32..=4096).contains(&h) {
-                return Err(PerceptionError::InvalidConfig {
-                    field: "input_size",
-                    value: format!("{w}x{h}"),
-                    reason: "width and height must be in 32..=4096",
-                });
-            }
+        if let Some((w, h)) = self.input_size
+            && (!(32..=4096).contains(&w) || !(32..=4096).contains(&h))
+        {
+            return Err(PerceptionError::InvalidConfig {
+                field: "input_size",
+                value: format!("{w}x{h}"),
+                reason: "width and height must be in 32..=4096",
+            });
         }
         if self.model_path.as_os_str().is_empty() {
             return Err(PerceptionError::InvalidConfig {
@@ -156,7 +156,9 @@ pub struct Segmenter {
 
 impl std::fmt::Debug for Segmenter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Segmenter").field("info", &self.info).finish()
+        f.debug_struct("Segmenter")
+            .field("info", &self.info)
+            .finish()
     }
 }
 
@@ -241,7 +243,12 @@ impl Segmenter {
 
     /// Runs the model on an already preprocessed NCHW float32 tensor of `3 * height * width`
     /// values (see [`crate::preprocess`]). Exposed for benchmarks that time the stages apart.
-    pub fn run(&self, input: &[f32], width: u32, height: u32) -> Result<ClassMask, PerceptionError> {
+    pub fn run(
+        &self,
+        input: &[f32],
+        width: u32,
+        height: u32,
+    ) -> Result<ClassMask, PerceptionError> {
         let expected = 3 * width as usize * height as usize;
         if input.len() != expected || width == 0 || height == 0 {
             return Err(PerceptionError::invalid_input(
@@ -250,11 +257,9 @@ impl Segmenter {
                 format!("a 3x{height}x{width} tensor has {expected}"),
             ));
         }
-        let tensor = TensorRef::from_array_view((
-            [1usize, 3, height as usize, width as usize],
-            input,
-        ))
-        .map_err(|e| PerceptionError::runtime("creating the input tensor", e))?;
+        let tensor =
+            TensorRef::from_array_view(([1usize, 3, height as usize, width as usize], input))
+                .map_err(|e| PerceptionError::runtime("creating the input tensor", e))?;
         // A poisoned lock only means another inference panicked; the session itself is intact.
         let mut session = self
             .session
@@ -328,14 +333,14 @@ static ENVIRONMENT_INIT: Mutex<()> = Mutex::new(());
 
 fn environment(configured: Option<&Path>) -> Result<(PathBuf, Environment), PerceptionError> {
     if let Some((loaded, env)) = ENVIRONMENT.get() {
-        if let Some(asked) = configured {
-            if asked != loaded {
-                tracing::warn!(
-                    asked = %asked.display(),
-                    loaded = %loaded.display(),
-                    "ONNX Runtime is already loaded from another file; the configured ort_library is ignored"
-                );
-            }
+        if let Some(asked) = configured
+            && asked != loaded
+        {
+            tracing::warn!(
+                asked = %asked.display(),
+                loaded = %loaded.display(),
+                "ONNX Runtime is already loaded from another file; the configured ort_library is ignored"
+            );
         }
         return Ok((loaded.clone(), env.clone()));
     }
@@ -448,10 +453,13 @@ fn check_signature(session: &Session, path: &Path) -> Result<(), PerceptionError
             inputs[0].name()
         )));
     }
-    if let Some(channels) = input.tensor_shape().map(|s| s[1]) {
-        if channels != 3 && channels != -1 {
-            return Err(bad(format!("input has {channels} channels, expected 3 (RGB)")));
-        }
+    if let Some(channels) = input.tensor_shape().map(|s| s[1])
+        && channels != 3
+        && channels != -1
+    {
+        return Err(bad(format!(
+            "input has {channels} channels, expected 3 (RGB)"
+        )));
     }
     let output = outputs[0].dtype();
     if output.tensor_type() != Some(TensorElementType::Uint8) {

@@ -55,7 +55,12 @@ pub struct ServeArgs {
 #[derive(Debug, Args)]
 pub struct DetectArgs {
     /// PLY point cloud (ascii or binary little-endian; x y z, optional class/label).
-    #[arg(long, value_name = "FILE.ply", required_unless_present = "recording", conflicts_with = "recording")]
+    #[arg(
+        long,
+        value_name = "FILE.ply",
+        required_unless_present = "recording",
+        conflicts_with = "recording"
+    )]
     pub points: Option<PathBuf>,
     /// MCAP recording of frames (image + cloud + poses), as written by the simulator.
     #[arg(long, value_name = "FILE.mcap")]
@@ -130,7 +135,10 @@ impl DetectArgs {
             ModeArg::PointClasses => SegmentationMode::PointClasses,
             ModeArg::None => SegmentationMode::None,
         };
-        FrameOptions { params, segmentation_mode }
+        FrameOptions {
+            params,
+            segmentation_mode,
+        }
     }
 
     /// The pipeline for this run: with the model when a recording may use it.
@@ -146,7 +154,10 @@ impl DetectArgs {
             (None, _) => None,
         };
         if let Some(model_path) = model {
-            let config = crate::config::SegmentationConfig { model_path, ..Default::default() };
+            let config = crate::config::SegmentationConfig {
+                model_path,
+                ..Default::default()
+            };
             let segmenter = crate::segmentation::Segmenter::load(&config)
                 .with_context(|| format!("load the model {}", config.model_path.display()))?;
             pipeline.segmenter = Some(std::sync::Arc::new(segmenter));
@@ -195,8 +206,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let out = match (&args.points, &args.recording) {
                 (Some(points), _) => detect_ply(points, &options, &pipeline)
                     .with_context(|| format!("detect on {}", points.display()))?,
-                (None, Some(recording)) => detect_recording(recording, args.frame, &options, &pipeline)
-                    .with_context(|| format!("detect on {}", recording.display()))?,
+                (None, Some(recording)) => {
+                    detect_recording(recording, args.frame, &options, &pipeline)
+                        .with_context(|| format!("detect on {}", recording.display()))?
+                }
                 (None, None) => anyhow::bail!("give --points FILE.ply or --recording FILE.mcap"),
             };
             if args.json {

@@ -44,15 +44,26 @@ pub fn detect_recording(
     options: &FrameOptions,
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
-    let io = |reason: String| Error::Io { path: path.display().to_string(), reason };
+    let io = |reason: String| Error::Io {
+        path: path.display().to_string(),
+        reason,
+    };
     let frames = landing_sim::recording::read_recording(path).map_err(|e| io(e.to_string()))?;
     let recorded = match sequence {
-        Some(k) => frames.iter().find(|r| r.frame.sequence == k).ok_or_else(|| {
-            let first = frames.first().map_or(0, |r| r.frame.sequence);
-            let last = frames.last().map_or(0, |r| r.frame.sequence);
-            io(format!("no frame with sequence {k}; it has {} frames, sequences {first}..={last}", frames.len()))
-        })?,
-        None => frames.first().ok_or_else(|| io("the recording has no frame".into()))?,
+        Some(k) => frames
+            .iter()
+            .find(|r| r.frame.sequence == k)
+            .ok_or_else(|| {
+                let first = frames.first().map_or(0, |r| r.frame.sequence);
+                let last = frames.last().map_or(0, |r| r.frame.sequence);
+                io(format!(
+                    "no frame with sequence {k}; it has {} frames, sequences {first}..={last}",
+                    frames.len()
+                ))
+            })?,
+        None => frames
+            .first()
+            .ok_or_else(|| io("the recording has no frame".into()))?,
     };
     let frame = Frame::try_from(&recorded.frame)?;
     run_pipeline(&frame, options, pipeline)

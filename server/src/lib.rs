@@ -14,6 +14,18 @@
 //! - [`cli_main`] — the binary's `main`, for tests that re-execute their own test binary as a
 //!   real server process (and send it SIGTERM).
 //!
+//! Notes for tests that start the server in process:
+//! - `Config::default()` has `segmentation.enabled = true` with the relative
+//!   `models/rooftop-segmentation.onnx`; relative paths resolve against the current directory
+//!   (a test's is its crate directory), so set an absolute `model_path` or disable segmentation.
+//!   The model needs the ONNX Runtime library (`scripts/setup-ort.sh`).
+//! - Set `server.metrics_listen = "127.0.0.1:0"` (or `""` to disable); the bound address is
+//!   [`RunningServer::metrics_addr`], and [`telemetry::scrape`] fetches `/metrics` from it.
+//! - [`cli::cli_main_from`] takes explicit arguments, e.g.
+//!   `["landing-server", "serve", "--listen", "127.0.0.1:0"]`; `serve` logs
+//!   `serving landing.v1` with an `addr` field once bound (`LANDING__LOG__FORMAT=json` gives a
+//!   parseable line) and exits 0 after SIGTERM/SIGINT and the drain.
+//!
 //! The handlers are thin: validate and convert ([`convert`]), hand the frame to the worker pool,
 //! convert back. Errors are one enum, [`Error`], mapped to gRPC statuses in one place
 //! ([`status`]).

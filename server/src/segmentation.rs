@@ -5,8 +5,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use landing_perception::{
-    CameraModel, ExecutionProvider, ImageData, PerceptionError, RgbImage, SegmenterConfig, classify_points,
-    decode_image,
+    CameraModel, ExecutionProvider, ImageData, PerceptionError, RgbImage, SegmenterConfig,
+    classify_points, decode_image,
 };
 
 use crate::Error;
@@ -32,15 +32,19 @@ pub struct Segmenter {
 impl Segmenter {
     /// Loads the model and its sessions as `[segmentation]` says.
     pub fn load(config: &SegmentationConfig) -> Result<Self, Error> {
-        let provider: ExecutionProvider = config
-            .execution_provider
-            .parse()
-            .map_err(|e: PerceptionError| Error::config("segmentation.execution_provider", e.to_string()))?;
+        let provider: ExecutionProvider =
+            config
+                .execution_provider
+                .parse()
+                .map_err(|e: PerceptionError| {
+                    Error::config("segmentation.execution_provider", e.to_string())
+                })?;
         let perception = SegmenterConfig {
             model_path: config.model_path.clone(),
             execution_provider: provider,
             intra_threads: config.intra_threads as usize,
-            ort_library: (!config.ort_library.as_os_str().is_empty()).then(|| config.ort_library.clone()),
+            ort_library: (!config.ort_library.as_os_str().is_empty())
+                .then(|| config.ort_library.clone()),
             input_size: None,
         };
         let sessions = (0..config.sessions.max(1))
@@ -48,11 +52,18 @@ impl Segmenter {
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| Error::config("segmentation.model_path", e.to_string()))?;
         if provider == ExecutionProvider::Cuda
-            && sessions.first().is_some_and(|s| s.info().execution_provider != ExecutionProvider::Cuda)
+            && sessions
+                .first()
+                .is_some_and(|s| s.info().execution_provider != ExecutionProvider::Cuda)
         {
-            tracing::warn!("segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU");
+            tracing::warn!(
+                "segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU"
+            );
         }
-        Ok(Self { sessions, next: AtomicUsize::new(0) })
+        Ok(Self {
+            sessions,
+            next: AtomicUsize::new(0),
+        })
     }
 
     fn info(&self) -> &landing_perception::ModelInfo {
@@ -93,7 +104,8 @@ impl Segmenter {
         world_points: &[[f32; 3]],
     ) -> Result<Classified, Error> {
         let t0 = Instant::now();
-        let session = &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
+        let session =
+            &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
         let mask = session.segment(image).map_err(|e| perception_error(&e))?;
         let t1 = Instant::now();
         let k = camera.intrinsics;
@@ -107,7 +119,11 @@ impl Segmenter {
             height: k.height,
         };
         let classes = classify_points(world_points, &model, &mask);
-        Ok(Classified { classes, segmentation: t1 - t0, classification: t1.elapsed() })
+        Ok(Classified {
+            classes,
+            segmentation: t1 - t0,
+            classification: t1.elapsed(),
+        })
     }
 }
 
@@ -115,12 +131,24 @@ impl Segmenter {
 pub fn decode(camera: &CameraImage) -> Result<RgbImage, Error> {
     let (data, field) = match &camera.pixels {
         ImagePixels::Encoded { format, data } => (
-            ImageData::compressed(format, data).map_err(|e| Error::invalid("frame.image.compressed.format", e.to_string()))?,
+            ImageData::compressed(format, data)
+                .map_err(|e| Error::invalid("frame.image.compressed.format", e.to_string()))?,
             "frame.image.compressed.data",
         ),
-        ImagePixels::Rgb8 { width, height, step, data } => {
-            (ImageData::Rgb8 { width: *width, height: *height, step: *step, data }, "frame.image.raw.data")
-        }
+        ImagePixels::Rgb8 {
+            width,
+            height,
+            step,
+            data,
+        } => (
+            ImageData::Rgb8 {
+                width: *width,
+                height: *height,
+                step: *step,
+                data,
+            },
+            "frame.image.raw.data",
+        ),
     };
     let image = decode_image(data).map_err(|e| Error::invalid(field, e.to_string()))?;
     let k = camera.intrinsics;
@@ -143,7 +171,9 @@ pub fn decode(camera: &CameraImage) -> Result<RgbImage, Error> {
 fn perception_error(e: &PerceptionError) -> Error {
     match e {
         PerceptionError::Decode { .. } => Error::invalid("frame.image", e.to_string()),
-        PerceptionError::InvalidInput { field, .. } => Error::invalid(format!("frame.image.{field}"), e.to_string()),
+        PerceptionError::InvalidInput { field, .. } => {
+            Error::invalid(format!("frame.image.{field}"), e.to_string())
+        }
         _ => Error::Segmentation(e.to_string()),
     }
 }

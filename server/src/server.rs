@@ -161,7 +161,13 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .context("build the reflection service")?;
     let reflection = InterceptedService::new(reflection, auth);
 
-    let mut builder = Server::builder();
+    // Frames are hundreds of KiB to MiBs: HTTP/2's default 64 KiB windows would cost a round trip
+    // per window of every frame.
+    let window = u32::try_from(config.server.max_request_bytes.min(8 << 20)).unwrap_or(8 << 20);
+    let mut builder = Server::builder()
+        .initial_stream_window_size(window)
+        .initial_connection_window_size(window.saturating_mul(4))
+        .tcp_nodelay(true);
     if let Some(tls) = tls {
         builder = builder.tls_config(tls).context("configure TLS")?;
     }

@@ -214,3 +214,24 @@ impl v1::landing_service_server::LandingService for LandingService {
         }))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grpc_timeout_header_becomes_a_deadline() {
+        let mut m = tonic::metadata::MetadataMap::new();
+        assert!(deadline_of(&m).is_none());
+        m.insert("grpc-timeout", "250m".parse().unwrap());
+        let d = deadline_of(&m).unwrap().duration_since(Instant::now());
+        assert!(
+            d <= Duration::from_millis(250) && d > Duration::from_millis(200),
+            "{d:?}"
+        );
+        m.insert("grpc-timeout", "3S".parse().unwrap());
+        assert!(deadline_of(&m).unwrap() > Instant::now() + Duration::from_secs(2));
+        m.insert("grpc-timeout", "7x".parse().unwrap());
+        assert!(deadline_of(&m).is_none());
+    }
+}

@@ -202,29 +202,58 @@ fn check_config_accepts_good_and_names_bad_keys() {
 }
 
 fn sample(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../samples").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../samples")
+        .join(name)
 }
 
 #[test]
 fn detect_on_the_committed_samples() {
-    let out = bin().args(["detect", "--json", "--points"]).arg(sample("roof.ply")).output().unwrap();
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let out = bin()
+        .args(["detect", "--json", "--points"])
+        .arg(sample("roof.ply"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(!doc["sites"].as_array().unwrap().is_empty(), "{doc}");
 
     // A recorded frame with its own point classes (no model needed).
     let out = bin()
-        .args(["detect", "--json", "--segmentation", "point-classes", "--frame", "14", "--recording"])
+        .args([
+            "detect",
+            "--json",
+            "--segmentation",
+            "point-classes",
+            "--frame",
+            "14",
+            "--recording",
+        ])
         .arg(sample("rooftops.mcap"))
         .output()
         .unwrap();
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["segmentation_mode"], "point_classes");
-    assert!(doc["timings_us"]["decode"].is_u64(), "the image is decoded: {doc}");
+    assert!(
+        doc["timings_us"]["decode"].is_u64(),
+        "the image is decoded: {doc}"
+    );
     assert!(!doc["sites"].as_array().unwrap().is_empty(), "{doc}");
 
-    let out = bin().args(["detect", "--frame", "999", "--recording"]).arg(sample("rooftops.mcap")).output().unwrap();
+    let out = bin()
+        .args(["detect", "--frame", "999", "--recording"])
+        .arg(sample("rooftops.mcap"))
+        .output()
+        .unwrap();
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("no frame with sequence 999"));
 }
@@ -234,16 +263,31 @@ fn detect_a_recorded_frame_with_the_model() {
     // Needs the ONNX Runtime library (scripts/setup-ort.sh) and the shipped model.
     let model = sample("../models/rooftop-segmentation.onnx");
     let out = bin()
-        .args(["detect", "--json", "--segmentation", "model", "--frame", "14", "--recording"])
+        .args([
+            "detect",
+            "--json",
+            "--segmentation",
+            "model",
+            "--frame",
+            "14",
+            "--recording",
+        ])
         .arg(sample("rooftops.mcap"))
         .arg("--model")
         .arg(&model)
         .output()
         .unwrap();
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "stderr: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let doc: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(doc["segmentation_mode"], "model");
     for step in ["decode", "segmentation", "classification", "triangulation"] {
-        assert!(doc["timings_us"][step].is_u64(), "timings_us.{step} missing: {doc}");
+        assert!(
+            doc["timings_us"][step].is_u64(),
+            "timings_us.{step} missing: {doc}"
+        );
     }
 }

@@ -563,14 +563,22 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
     c.segmentation.model_path = workspace().join("models/rooftop-segmentation.onnx");
     let segmenter = landing_server::segmentation::Segmenter::load(&c.segmentation).unwrap();
     let (server, channel) = start_with(c).await;
-    let info = client(&channel).get_service_info(v1::GetServiceInfoRequest {}).await.unwrap().into_inner();
+    let info = client(&channel)
+        .get_service_info(v1::GetServiceInfoRequest {})
+        .await
+        .unwrap()
+        .into_inner();
     let model = info.model.expect("the model is reported");
     assert_eq!(model.sha256.len(), 64);
     assert_eq!(model.execution_provider, "cpu");
 
-    let recorded = landing_sim::recording::read_recording(&workspace().join("samples/rooftops.mcap")).unwrap();
+    let recorded =
+        landing_sim::recording::read_recording(&workspace().join("samples/rooftops.mcap")).unwrap();
     let frames: Vec<v1::Frame> = recorded.into_iter().take(4).map(|r| r.frame).collect();
-    let options = v1::PipelineOptions { segmentation_mode: v1::SegmentationMode::Model as i32, ..Default::default() };
+    let options = v1::PipelineOptions {
+        segmentation_mode: v1::SegmentationMode::Model as i32,
+        ..Default::default()
+    };
     let requests = frames
         .iter()
         .map(|f| v1::StreamLandingSitesRequest {
@@ -581,14 +589,22 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
         .collect();
     let responses = stream_all(&channel, requests).await;
 
-    let pipeline = Pipeline { segmenter: Some(std::sync::Arc::new(segmenter)), ..Pipeline::default() };
+    let pipeline = Pipeline {
+        segmenter: Some(std::sync::Arc::new(segmenter)),
+        ..Pipeline::default()
+    };
     for (frame, response) in frames.iter().zip(&responses) {
         assert_eq!(response.sequence, frame.sequence);
-        let Some(Outcome::Result(result)) = &response.outcome else { panic!("{response:?}") };
+        let Some(Outcome::Result(result)) = &response.outcome else {
+            panic!("{response:?}")
+        };
         assert_eq!(result.segmentation_mode, v1::SegmentationMode::Model as i32);
         let t = result.timings.as_ref().unwrap();
         assert!(t.decode.is_some() && t.segmentation.is_some() && t.classification.is_some());
-        let request = v1::DetectLandingSitesRequest { frame: Some(frame.clone()), options: Some(options.clone()) };
+        let request = v1::DetectLandingSitesRequest {
+            frame: Some(frame.clone()),
+            options: Some(options.clone()),
+        };
         let (f, o) = convert::request_parts(&request, &pipeline.defaults).unwrap();
         let expected = v1::FrameResult::from(&run_pipeline(&f, &o, &pipeline).unwrap());
         assert_eq!(result.sites, expected.sites);
@@ -597,15 +613,23 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
 
     // An image that does not decode is the caller's error, named.
     let mut broken = frames[0].clone();
-    if let Some(v1::camera_image::Image::Compressed(c)) = broken.image.as_mut().unwrap().image.as_mut() {
+    if let Some(v1::camera_image::Image::Compressed(c)) =
+        broken.image.as_mut().unwrap().image.as_mut()
+    {
         c.data.truncate(40);
     }
     let status = client(&channel)
-        .detect_landing_sites(v1::DetectLandingSitesRequest { frame: Some(broken), options: None })
+        .detect_landing_sites(v1::DetectLandingSitesRequest {
+            frame: Some(broken),
+            options: None,
+        })
         .await
         .unwrap_err();
     assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
     let details = status.get_error_details();
-    assert_eq!(details.bad_request().unwrap().field_violations[0].field, "frame.image.compressed.data");
+    assert_eq!(
+        details.bad_request().unwrap().field_violations[0].field,
+        "frame.image.compressed.data"
+    );
     server.shutdown().await.unwrap();
 }

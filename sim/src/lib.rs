@@ -2,11 +2,35 @@
 //! Unreal/AirSim testbed.
 //!
 //! A [`World`] is a grid of blocks of flat-roofed buildings with parapets and rooftop assets drawn
-//! from the paper's Table III (or with equal probabilities, for training worlds), generated from a
-//! seed. [`camera::render`] ray-casts an RGB image with a class label per pixel; the crate's
-//! [`dataset`] module writes image/label datasets for training the segmentation model.
+//! from the paper's Table III ([`assets`]: per-asset count histograms, a kernel density estimate
+//! of them, or equal probabilities for training worlds), generated from a seed. Sensors:
+//! [`camera::render`] ray-casts an RGB image with a class label per pixel, [`lidar::scan`] the
+//! 16-beam 40°×60° LiDAR with each point's true class; both go through one bounding-volume
+//! hierarchy over analytic boxes, cylinders, cones and spheres ([`scene`]). [`flight`] makes the
+//! poses (T_world_sensor, camera in the optical convention), [`truth`] the per-frame ground truth
+//! (roofs in view, obstacle footprints, true best landing point from
+//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP files and their reader, and
+//! [`dataset`] the image/label datasets (its module docs give the manifest format).
 //!
 //! Classes are [`landing_geometry::SemanticClass`] ids everywhere.
+//!
+//! Command line (binary `landing-sim`):
+//!
+//! ```text
+//! landing-sim dataset --seed 1 --images 2000 --split train --out DIR [--width 256 --height 192]
+//! landing-sim record  --seed 1 --frames 15 --out F.mcap [--width 320 --height 240]
+//! landing-sim preview --seed 1 --out F.png
+//! landing-sim ply     --seed 1 --out samples/roof.ply
+//! ```
+//!
+//! Reading a recording from another crate:
+//!
+//! ```no_run
+//! let pairs = landing_sim::recording::read_pairs("samples/rooftops.mcap".as_ref()).unwrap();
+//! for (frame, truth) in &pairs {
+//!     println!("frame {}: best radius {:.2} m", frame.sequence, truth.roofs[0].best_safe_radius_m);
+//! }
+//! ```
 //!
 //! ```
 //! use landing_sim::{World, WorldConfig};

@@ -12,7 +12,7 @@ use landing_sim::lidar::{LidarConfig, scan};
 use landing_sim::recording::{
     RecordConfig, busiest_roof, write_ply as write_recording_ply, write_recording,
 };
-use landing_sim::{AssetDistribution, World, WorldConfig};
+use landing_sim::{AssetDistribution, AssetKind, World, WorldConfig};
 use rand::SeedableRng;
 
 #[derive(Parser)]
@@ -113,6 +113,28 @@ enum Command {
         /// Roof to scan (default: the one with the most assets).
         #[arg(long)]
         building: Option<usize>,
+    },
+    /// Write the `landing eval` scenario set: approach flights to many buildings of
+    /// Manhattan-distribution worlds (seeds seed, seed+1, ...), one MCAP per building, buildings
+    /// with a tarp or a water tower first.
+    Scenarios {
+        #[arg(long, default_value_t = 2026)]
+        seed: u64,
+        /// Worlds to draw buildings from.
+        #[arg(long, default_value_t = 6)]
+        worlds: u64,
+        /// Buildings per world.
+        #[arg(long, default_value_t = 6)]
+        buildings: usize,
+        /// Frames per approach (from 40 m down to 10 m above the roof).
+        #[arg(long, default_value_t = 4)]
+        frames: u32,
+        #[arg(long)]
+        out: PathBuf,
+        #[arg(long, default_value_t = 320)]
+        width: u32,
+        #[arg(long, default_value_t = 240)]
+        height: u32,
     },
     /// Render one view (image and colourised labels side by side) to a PNG.
     Preview {
@@ -252,6 +274,61 @@ fn main() -> anyhow::Result<()> {
                 points.len(),
                 world.buildings[b].assets.len(),
                 out.display()
+            );
+        }
+        Command::Scenarios {
+            seed,
+            worlds,
+            buildings,
+            frames,
+            out,
+            width,
+            height,
+        } => {
+            std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+            let start = Instant::now();
+            let (mut files, mut total) = (0usize, 0usize);
+            for world_seed in seed..seed + worlds {
+                let world = World::generate(world_seed, &WorldConfig::default())?;
+                let has = |b: usize, kind: AssetKind| {
+                    world.buildings[b]
+                        .assets
+                        .iter()
+                        .any(|&a| world.assets[a].kind == kind)
+                };
+                // Hard cases first (tarps, water towers on legs), then a seeded order.
+                let mut order: Vec<usize> = (0..world.buildings.len()).collect();
+                order.sort_by_key(|&b| {
+                    let mix = (b as u64 ^ world_seed).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+                    (
+                        !has(b, AssetKind::Tarp),
+                        !has(b, AssetKind::WaterTower),
+                        mix,
+                    )
+                });
+                for &b in order.iter().take(buildings) {
+                    let config = RecordConfig {
+                        seed: world_seed,
+                        flight: FlightConfig {
+                            frames,
+                            ..Default::default()
+                        },
+                        width,
+                        height,
+                        building: Some(b),
+                        drone_id: format!("w{world_seed}-b{b}"),
+                        ..Default::default()
+                    };
+                    let path = out.join(format!("w{world_seed}-b{b:03}.mcap"));
+                    total += write_recording(&config, &path)
+                        .with_context(|| format!("writing {}", path.display()))?;
+                    files += 1;
+                }
+            }
+            println!(
+                "wrote {total} frames of {files} approaches to {} in {:.1} s",
+                out.display(),
+                start.elapsed().as_secs_f64()
             );
         }
         Command::Preview {

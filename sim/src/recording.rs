@@ -162,8 +162,8 @@ pub fn pose_from_proto(p: Option<&v1::Pose>) -> Isometry3<f64> {
     let Some(p) = p else {
         return Isometry3::identity();
     };
-    let t = p.position.clone().unwrap_or_default();
-    let q = p.orientation.clone().unwrap_or(v1::Quaternion {
+    let t = p.position.unwrap_or_default();
+    let q = p.orientation.unwrap_or(v1::Quaternion {
         x: 0.0,
         y: 0.0,
         z: 0.0,
@@ -249,7 +249,7 @@ pub fn frame_messages(
         point_cloud: Some(v1::PointCloud {
             timestamp: Some(ts),
             frame_id: "lidar".to_string(),
-            pose: Some(lidar_pose.clone()),
+            pose: Some(lidar_pose),
             point_stride: POINT_STRIDE,
             fields: fields(),
             data: pack_points(&f.points),
@@ -257,7 +257,7 @@ pub fn frame_messages(
         image: Some(v1::CameraImage {
             timestamp: Some(ts),
             frame_id: "camera".to_string(),
-            pose: Some(cam_pose.clone()),
+            pose: Some(cam_pose),
             calibration: Some(calibration(&f.intrinsics)),
             image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
                 data: encode_rgb_png(&f.image)?,
@@ -269,7 +269,7 @@ pub fn frame_messages(
     let labels = v1::CameraImage {
         timestamp: Some(ts),
         frame_id: "camera".to_string(),
-        pose: Some(cam_pose.clone()),
+        pose: Some(cam_pose),
         calibration: Some(calibration(&f.intrinsics)),
         image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
             data: encode_label_png(&f.image)?,

@@ -84,14 +84,13 @@ impl WorldConfig {
             min_total,
             max_total,
         } = self.assets
+            && (min_total > max_total || max_total > 100)
         {
-            if min_total > max_total || max_total > 100 {
-                return Err(SimError::invalid(
-                    "assets",
-                    format!("Uniform {{ {min_total}..={max_total} }}"),
-                    "needs min_total <= max_total <= 100",
-                ));
-            }
+            return Err(SimError::invalid(
+                "assets",
+                format!("Uniform {{ {min_total}..={max_total} }}"),
+                "needs min_total <= max_total <= 100",
+            ));
         }
         Ok(())
     }
@@ -254,6 +253,8 @@ impl World {
         let mut prims = Vec::new();
         let mut assets = Vec::new();
         let mut dropped = 0usize;
+        // Indexing: the loop pushes asset indices into `buildings[bi]` while reading it.
+        #[allow(clippy::needless_range_loop)]
         for bi in 0..buildings.len() {
             building_prims(&buildings[bi], bi as u32, &mut rng, &mut prims);
             let counts = sample_counts(config.assets, &mut rng);
@@ -837,6 +838,40 @@ mod tests {
                     assert!(!obb_overlap(&w.assets[i], &w.assets[j], 0.0));
                 }
             }
+        }
+    }
+
+    /// The sampled counts are what the roofs get: in Manhattan worlds fewer than 4 % of the drawn
+    /// assets fail to find room (about 2.6 % today: small roofs), and the placed means stay near
+    /// Table III's.
+    #[test]
+    fn manhattan_worlds_place_nearly_every_sampled_asset() {
+        let (mut placed, mut dropped, mut buildings) = (0usize, 0usize, 0usize);
+        let mut per_kind = [0usize; 12];
+        for seed in 0..20 {
+            let w = World::generate(seed, &WorldConfig::default()).expect("world");
+            placed += w.assets.len();
+            dropped += w.dropped_assets;
+            buildings += w.buildings.len();
+            for a in &w.assets {
+                per_kind[AssetKind::ALL
+                    .iter()
+                    .position(|k| *k == a.kind)
+                    .expect("kind")] += 1;
+            }
+        }
+        assert!(
+            dropped * 25 < placed + dropped,
+            "{dropped} of {} dropped",
+            placed + dropped
+        );
+        for (i, kind) in AssetKind::ALL.iter().enumerate() {
+            let mean = per_kind[i] as f64 / buildings as f64;
+            assert!(
+                (mean - kind.table_iii_mean()).abs() < 0.25 * kind.table_iii_mean() + 0.05,
+                "{}: {mean} per building over {buildings}",
+                kind.name()
+            );
         }
     }
 

@@ -32,7 +32,10 @@ fn assert_same_sites(got: &[(f64, [f64; 3])], want: &[(f64, [f64; 3])]) {
     assert_eq!(got.len(), want.len(), "{got:?} vs {want:?}");
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * (1.0 + a.abs().max(b.abs()));
     for (g, w) in got.iter().zip(want) {
-        assert!(close(g.0, w.0) && (0..3).all(|k| close(g.1[k], w.1[k])), "{g:?} vs {w:?}");
+        assert!(
+            close(g.0, w.0) && (0..3).all(|k| close(g.1[k], w.1[k])),
+            "{g:?} vs {w:?}"
+        );
     }
 }
 
@@ -42,8 +45,16 @@ fn sites_of_json(v: &Value) -> Vec<(f64, [f64; 3])> {
         .expect("sites")
         .iter()
         .map(|s| {
-            let c: Vec<f64> = s["center"].as_array().expect("center").iter().map(|x| x.as_f64().expect("f64")).collect();
-            (s["safe_radius_m"].as_f64().expect("radius"), [c[0], c[1], c[2]])
+            let c: Vec<f64> = s["center"]
+                .as_array()
+                .expect("center")
+                .iter()
+                .map(|x| x.as_f64().expect("f64"))
+                .collect();
+            (
+                s["safe_radius_m"].as_f64().expect("radius"),
+                [c[0], c[1], c[2]],
+            )
         })
         .collect()
 }
@@ -56,11 +67,17 @@ async fn info_prints_version_classes_and_defaults() {
     let v: Value = serde_json::from_str(&out).expect("json");
     assert!(!v["version"].as_str().expect("version").is_empty());
     let classes = v["classes"].as_array().expect("classes");
-    assert!(classes.iter().any(|c| c["name"] == "building rooftop"), "{classes:?}");
+    assert!(
+        classes.iter().any(|c| c["name"] == "building rooftop"),
+        "{classes:?}"
+    );
     assert_eq!(v["default_options"]["max_triangle_edge_m"], "4");
     let (code, table) = landing(&["--server", &server.url, "info"]).await;
     assert_eq!(code, exit::OK);
-    assert!(table.contains("min_normal_dot") && table.contains("0.96"), "{table}");
+    assert!(
+        table.contains("min_normal_dot") && table.contains("0.96"),
+        "{table}"
+    );
     server.stop().await;
 }
 
@@ -70,11 +87,26 @@ async fn detect_on_a_recording_and_on_a_ply_matches_the_pipeline() {
     let s = scene(61);
     let last = s.frames.len() - 1;
     let path = s.path.to_str().expect("path");
-    let (code, out) =
-        landing(&["--server", &server.url, "detect", path, "--frame", &last.to_string(), "--segmentation", "point-classes", "--json"]).await;
+    let (code, out) = landing(&[
+        "--server",
+        &server.url,
+        "detect",
+        path,
+        "--frame",
+        &last.to_string(),
+        "--segmentation",
+        "point-classes",
+        "--json",
+    ])
+    .await;
     assert_eq!(code, exit::OK, "{out}");
     let v: Value = serde_json::from_str(&out).expect("json");
-    let want = in_process(server.reference(), &s.frames[last].frame, &mode(SegmentationMode::PointClasses)).expect("pipeline");
+    let want = in_process(
+        server.reference(),
+        &s.frames[last].frame,
+        &mode(SegmentationMode::PointClasses),
+    )
+    .expect("pipeline");
     assert_same_sites(&sites_of_json(&v), &sites_of(&want));
     assert!(!want.sites.is_empty());
 
@@ -87,25 +119,57 @@ async fn detect_on_a_recording_and_on_a_ply_matches_the_pipeline() {
         "ply\nformat ascii 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar class\nend_header\n",
         world.len()
     );
-    let pts: Vec<[f32; 3]> = world.iter().map(|p| [p[0] as f32, p[1] as f32, p[2] as f32]).collect();
+    let pts: Vec<[f32; 3]> = world
+        .iter()
+        .map(|p| [p[0] as f32, p[1] as f32, p[2] as f32])
+        .collect();
     for (p, c) in pts.iter().zip(&classes) {
         ply.push_str(&format!("{} {} {} {c}\n", p[0], p[1], p[2]));
     }
     let ply_path = out_path("scene-61.ply");
     std::fs::write(&ply_path, ply).expect("write ply");
     let (code, out) = landing(&[
-        "--server", &server.url, "detect", ply_path.to_str().expect("path"), "--segmentation", "point-classes", "--json",
+        "--server",
+        &server.url,
+        "detect",
+        ply_path.to_str().expect("path"),
+        "--segmentation",
+        "point-classes",
+        "--json",
     ])
     .await;
     assert_eq!(code, exit::OK, "{out}");
-    let frame = FrameBuilder::new(0, PointCloudBuilder::new(&pts).classes(&classes).build().expect("cloud")).build();
-    let want = in_process(server.reference(), &frame, &mode(SegmentationMode::PointClasses)).expect("pipeline");
+    let frame = FrameBuilder::new(
+        0,
+        PointCloudBuilder::new(&pts)
+            .classes(&classes)
+            .build()
+            .expect("cloud"),
+    )
+    .build();
+    let want = in_process(
+        server.reference(),
+        &frame,
+        &mode(SegmentationMode::PointClasses),
+    )
+    .expect("pipeline");
     let v: Value = serde_json::from_str(&out).expect("json");
     assert_same_sites(&sites_of_json(&v), &sites_of(&want));
 
-    let (code, table) = landing(&["--server", &server.url, "detect", path, "--frame", &last.to_string()]).await;
+    let (code, table) = landing(&[
+        "--server",
+        &server.url,
+        "detect",
+        path,
+        "--frame",
+        &last.to_string(),
+    ])
+    .await;
     assert_eq!(code, exit::OK);
-    assert!(table.contains("rank") || table.contains("0 site(s)"), "{table}");
+    assert!(
+        table.contains("rank") || table.contains("0 site(s)"),
+        "{table}"
+    );
     server.stop().await;
 }
 
@@ -116,16 +180,30 @@ async fn replay_writes_json_lines_and_mcap_equal_to_the_pipeline() {
     let jsonl = out_path("replay-62.jsonl");
     let mcap = out_path("replay-62.mcap");
     let (code, out) = landing(&[
-        "--server", &server.url, "replay", s.path.to_str().expect("path"), "--segmentation", "point-classes",
-        "--jsonl", jsonl.to_str().expect("path"), "--out", mcap.to_str().expect("path"),
+        "--server",
+        &server.url,
+        "replay",
+        s.path.to_str().expect("path"),
+        "--segmentation",
+        "point-classes",
+        "--jsonl",
+        jsonl.to_str().expect("path"),
+        "--out",
+        mcap.to_str().expect("path"),
     ])
     .await;
     assert_eq!(code, exit::OK, "{out}");
-    assert!(out.contains(&format!("{} frames: {} ok", s.frames.len(), s.frames.len())), "{out}");
+    assert!(
+        out.contains(&format!("{} frames: {} ok", s.frames.len(), s.frames.len())),
+        "{out}"
+    );
 
     let options = mode(SegmentationMode::PointClasses);
-    let expected: Vec<v1::FrameResult> =
-        s.frames.iter().map(|f| in_process(server.reference(), &f.frame, &options).expect("pipeline")).collect();
+    let expected: Vec<v1::FrameResult> = s
+        .frames
+        .iter()
+        .map(|f| in_process(server.reference(), &f.frame, &options).expect("pipeline"))
+        .collect();
     let lines: Vec<Value> = std::fs::read_to_string(&jsonl)
         .expect("jsonl")
         .lines()
@@ -139,20 +217,35 @@ async fn replay_writes_json_lines_and_mcap_equal_to_the_pipeline() {
     }
 
     let bytes = std::fs::read(&mcap).expect("mcap");
-    let messages: Vec<_> = mcap::MessageStream::new(&bytes).expect("mcap").map(|m| m.expect("message")).collect();
+    let messages: Vec<_> = mcap::MessageStream::new(&bytes)
+        .expect("mcap")
+        .map(|m| m.expect("message"))
+        .collect();
     assert_eq!(messages.len(), expected.len());
     for ((m, want), rec) in messages.iter().zip(&expected).zip(&s.frames) {
         assert_eq!(m.channel.topic, RESULT_TOPIC);
         let ts = rec.frame.timestamp.expect("timestamp");
-        assert_eq!(m.log_time, ts.seconds as u64 * 1_000_000_000 + ts.nanos as u64, "aligned with the input");
+        assert_eq!(
+            m.log_time,
+            ts.seconds as u64 * 1_000_000_000 + ts.nanos as u64,
+            "aligned with the input"
+        );
         let r = v1::StreamLandingSitesResponse::decode(&m.data[..]).expect("decode");
-        let Some(v1::stream_landing_sites_response::Outcome::Result(got)) = r.outcome else { panic!("{r:?}") };
+        let Some(v1::stream_landing_sites_response::Outcome::Result(got)) = r.outcome else {
+            panic!("{r:?}")
+        };
         assert_eq!(untimed(got), untimed(want.clone()));
     }
 
     // Every frame refused (bad option) is exit 4, with the field in the output.
     let (code, out) = landing(&[
-        "--server", &server.url, "--json", "replay", s.path.to_str().expect("path"), "--min-normal-dot", "1.5",
+        "--server",
+        &server.url,
+        "--json",
+        "replay",
+        s.path.to_str().expect("path"),
+        "--min-normal-dot",
+        "1.5",
     ])
     .await;
     assert_eq!(code, exit::FRAMES_FAILED, "{out}");
@@ -165,8 +258,17 @@ async fn loadtest_reports_exactly_once_delivery() {
     let server = TestServer::start().await;
     let s = scene(63);
     let (code, out) = landing(&[
-        "--server", &server.url, "loadtest", s.path.to_str().expect("path"), "--streams", "2", "--duration", "2",
-        "--segmentation", "none", "--json",
+        "--server",
+        &server.url,
+        "loadtest",
+        s.path.to_str().expect("path"),
+        "--streams",
+        "2",
+        "--duration",
+        "2",
+        "--segmentation",
+        "none",
+        "--json",
     ])
     .await;
     assert_eq!(code, exit::OK, "{out}");
@@ -186,8 +288,18 @@ async fn render_draws_the_site_where_it_is() {
     let last = s.frames.len() - 1;
     let png = out_path("render-64.png");
     let (code, out) = landing(&[
-        "--server", &server.url, "render", s.path.to_str().expect("path"), "--frame", &last.to_string(),
-        "--segmentation", "point-classes", "--sites", "1", "--out", png.to_str().expect("path"),
+        "--server",
+        &server.url,
+        "render",
+        s.path.to_str().expect("path"),
+        "--frame",
+        &last.to_string(),
+        "--segmentation",
+        "point-classes",
+        "--sites",
+        "1",
+        "--out",
+        png.to_str().expect("path"),
     ])
     .await;
     assert_eq!(code, exit::OK, "{out}");
@@ -195,30 +307,68 @@ async fn render_draws_the_site_where_it_is() {
 
     // Where the site is: project it the way the renderer does.
     let frame = &s.frames[last].frame;
-    let result = in_process(server.reference(), frame, &mode(SegmentationMode::PointClasses)).expect("pipeline");
-    let layout = render(frame, &result, &RenderConfig { max_sites: 1, ..RenderConfig::default() }).expect("render");
+    let result = in_process(
+        server.reference(),
+        frame,
+        &mode(SegmentationMode::PointClasses),
+    )
+    .expect("pipeline");
+    let layout = render(
+        frame,
+        &result,
+        &RenderConfig {
+            max_sites: 1,
+            ..RenderConfig::default()
+        },
+    )
+    .expect("render");
     assert_eq!((image.width(), image.height()), layout.image.dimensions());
     let site = result.sites.first().expect("a site");
     let c = site.center.expect("centre");
     let centre = [c.x, c.y, c.z];
-    let (x, y) = layout.top_down_pixel(centre).expect("centre in the top-down panel");
-    assert_eq!(*image.get_pixel(x, y), STAR_YELLOW, "the star marks the centre from above");
+    let (x, y) = layout
+        .top_down_pixel(centre)
+        .expect("centre in the top-down panel");
+    assert_eq!(
+        *image.get_pixel(x, y),
+        STAR_YELLOW,
+        "the star marks the centre from above"
+    );
     if let Some((x, y)) = layout.camera_pixel(centre) {
-        assert_eq!(*image.get_pixel(x, y), STAR_YELLOW, "the star marks the centre in the camera image");
+        assert_eq!(
+            *image.get_pixel(x, y),
+            STAR_YELLOW,
+            "the star marks the centre in the camera image"
+        );
     }
     // Inside the safe circle but away from the star: the polygon's green.
     let off = [c.x + site.safe_radius_m * 0.7, c.y, c.z];
     let (x, y) = layout.top_down_pixel(off).expect("in the panel");
     let p = image.get_pixel(x, y).0;
-    assert!(p[1] > p[0] + 30 && p[1] > p[2] + 30, "green inside the polygon, got {p:?}");
+    assert!(
+        p[1] > p[0] + 30 && p[1] > p[2] + 30,
+        "green inside the polygon, got {p:?}"
+    );
     server.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unreachable_server_is_exit_3() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind")
+        .local_addr()
+        .expect("addr")
+        .port();
     let url = format!("http://127.0.0.1:{port}");
     let s = scene(61);
-    assert_eq!(landing(&["--server", &url, "info"]).await.0, exit::UNREACHABLE);
-    assert_eq!(landing(&["--server", &url, "replay", s.path.to_str().expect("path")]).await.0, exit::UNREACHABLE);
+    assert_eq!(
+        landing(&["--server", &url, "info"]).await.0,
+        exit::UNREACHABLE
+    );
+    assert_eq!(
+        landing(&["--server", &url, "replay", s.path.to_str().expect("path")])
+            .await
+            .0,
+        exit::UNREACHABLE
+    );
 }

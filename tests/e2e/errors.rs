@@ -11,11 +11,20 @@ async fn a_bad_frame_mid_stream_is_refused_by_field_and_the_stream_goes_on() {
     let mut frames: Vec<Frame> = scene(31).frames.iter().map(|f| f.frame.clone()).collect();
     frames[2].point_cloud.as_mut().expect("cloud").point_stride = 0;
     let items = check_frames(&server, &frames, mode(SegmentationMode::None)).await;
-    let FrameOutcome::Error(e) = &items[2].outcome else { panic!("frame 2: {:?}", items[2].outcome) };
+    let FrameOutcome::Error(e) = &items[2].outcome else {
+        panic!("frame 2: {:?}", items[2].outcome)
+    };
     assert_eq!(e.code, tonic::Code::InvalidArgument);
-    assert!(e.fields().contains(&"frame.point_cloud.point_stride"), "{e}");
+    assert!(
+        e.fields().contains(&"frame.point_cloud.point_stride"),
+        "{e}"
+    );
     for i in items.iter().skip(3) {
-        assert!(matches!(i.outcome, FrameOutcome::Result(_)), "frame {} after the bad one", i.sequence);
+        assert!(
+            matches!(i.outcome, FrameOutcome::Result(_)),
+            "frame {} after the bad one",
+            i.sequence
+        );
     }
     server.stop().await;
 }
@@ -26,16 +35,26 @@ async fn unary_errors_name_the_field() {
     let client = server.client().await;
     let frame = scene(31).frames[0].frame.clone();
 
-    let options = PipelineOptions { min_normal_dot: Some(1.5), ..Default::default() };
-    let err = client.detect_with(frame.clone(), Some(options)).await.unwrap_err();
-    let ClientError::Status(e) = &err else { panic!("{err}") };
+    let options = PipelineOptions {
+        min_normal_dot: Some(1.5),
+        ..Default::default()
+    };
+    let err = client
+        .detect_with(frame.clone(), Some(options))
+        .await
+        .unwrap_err();
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
     assert_eq!(e.code, tonic::Code::InvalidArgument);
     assert!(e.fields().contains(&"options.min_normal_dot"), "{e}");
 
     let mut no_cloud = frame;
     no_cloud.point_cloud = None;
     let err = client.detect(no_cloud).await.unwrap_err();
-    let ClientError::Status(e) = &err else { panic!("{err}") };
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
     assert_eq!(e.code, tonic::Code::InvalidArgument);
     assert!(e.fields().contains(&"frame.point_cloud"), "{e}");
     server.stop().await;

@@ -41,9 +41,15 @@ async fn overload_is_resource_exhausted_with_retry_info_and_every_frame_answered
     assert!(!refused.is_empty(), "{n} frames at once into a queue of 1");
     for e in &refused {
         assert_eq!(e.code, tonic::Code::ResourceExhausted, "{e}");
-        assert!(e.retry_delay.is_some(), "RESOURCE_EXHAUSTED carries RetryInfo: {e}");
+        assert!(
+            e.retry_delay.is_some(),
+            "RESOURCE_EXHAUSTED carries RetryInfo: {e}"
+        );
     }
-    assert!(matches!(items[0].outcome, FrameOutcome::Result(_)), "the first frame is admitted");
+    assert!(
+        matches!(items[0].outcome, FrameOutcome::Result(_)),
+        "the first frame is admitted"
+    );
     server.stop().await;
 }
 
@@ -56,13 +62,34 @@ async fn concurrent_streams_under_overload_get_exactly_one_answer_per_frame() {
         streams: 4,
         rate_hz: None,
         duration: Duration::from_secs(3),
-        stream: StreamConfig { options: Some(mode(SegmentationMode::None)), max_in_flight: 3, ..Default::default() },
+        stream: StreamConfig {
+            options: Some(mode(SegmentationMode::None)),
+            max_in_flight: 3,
+            ..Default::default()
+        },
     };
-    let report = run_load_test(&client, Arc::new(frames), &config, None).await.expect("load test");
+    let report = run_load_test(&client, Arc::new(frames), &config, None)
+        .await
+        .expect("load test");
     assert!(report.exactly_once(), "{report:?}");
-    assert!(report.sent > 0 && report.outcomes.get("ok").copied().unwrap_or(0) > 0, "{report:?}");
-    assert!(report.outcomes.get("resource_exhausted").copied().unwrap_or(0) > 0, "{report:?}");
-    assert_eq!(report.failed(), report.outcomes["resource_exhausted"], "only overload refusals: {report:?}");
+    assert!(
+        report.sent > 0 && report.outcomes.get("ok").copied().unwrap_or(0) > 0,
+        "{report:?}"
+    );
+    assert!(
+        report
+            .outcomes
+            .get("resource_exhausted")
+            .copied()
+            .unwrap_or(0)
+            > 0,
+        "{report:?}"
+    );
+    assert_eq!(
+        report.failed(),
+        report.outcomes["resource_exhausted"],
+        "only overload refusals: {report:?}"
+    );
     server.stop().await;
 }
 
@@ -70,17 +97,26 @@ async fn concurrent_streams_under_overload_get_exactly_one_answer_per_frame() {
 async fn unary_calls_retry_through_overload() {
     let server = tiny_server().await;
     let mut config = server.client_config();
-    config.retry = RetryPolicy { max_attempts: 40, ..RetryPolicy::default() };
+    config.retry = RetryPolicy {
+        max_attempts: 40,
+        ..RetryPolicy::default()
+    };
     let client = LandingClient::connect(config).await.expect("connect");
     let frame = scene(41).frames[0].frame.clone();
     let calls: Vec<_> = (0..4)
         .map(|_| {
             let (client, frame) = (client.clone(), frame.clone());
-            tokio::spawn(async move { client.detect_with(frame, Some(mode(SegmentationMode::None))).await })
+            tokio::spawn(async move {
+                client
+                    .detect_with(frame, Some(mode(SegmentationMode::None)))
+                    .await
+            })
         })
         .collect();
     for c in calls {
-        c.await.expect("task").expect("every call succeeds after backing off");
+        c.await
+            .expect("task")
+            .expect("every call succeeds after backing off");
     }
     server.stop().await;
 }

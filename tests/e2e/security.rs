@@ -17,8 +17,11 @@ impl Ca {
     fn new(name: &str) -> Self {
         let mut params = CertificateParams::new(Vec::<String>::new()).expect("params");
         params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        params.distinguished_name.push(rcgen::DnType::CommonName, name);
-        let issuer = CertifiedIssuer::self_signed(params, KeyPair::generate().expect("key")).expect("CA");
+        params
+            .distinguished_name
+            .push(rcgen::DnType::CommonName, name);
+        let issuer =
+            CertifiedIssuer::self_signed(params, KeyPair::generate().expect("key")).expect("CA");
         Self { issuer }
     }
 
@@ -28,7 +31,9 @@ impl Ca {
 
     /// (certificate PEM, key PEM) for `names`.
     fn leaf(&self, names: &[&str]) -> (Vec<u8>, Vec<u8>) {
-        let params = CertificateParams::new(names.iter().map(|s| s.to_string()).collect::<Vec<_>>()).expect("params");
+        let params =
+            CertificateParams::new(names.iter().map(|s| s.to_string()).collect::<Vec<_>>())
+                .expect("params");
         let key = KeyPair::generate().expect("key");
         let cert = params.signed_by(&key, &self.issuer).expect("sign");
         (cert.pem().into_bytes(), key.serialize_pem().into_bytes())
@@ -56,17 +61,42 @@ async fn tokens_let_friends_in_and_keep_strangers_out() {
     let err = anonymous.info().await.unwrap_err();
     assert_eq!(err.code(), Some(tonic::Code::Unauthenticated), "{err}");
     // Health is exempt, so orchestrators can probe without a token.
-    assert_eq!(anonymous.health("").await.expect("health"), ServingStatus::Serving);
+    assert_eq!(
+        anonymous.health("").await.expect("health"),
+        ServingStatus::Serving
+    );
 
-    let wrong = LandingClient::connect(server.client_config().with_token("beta-token")).await.expect("connect");
-    assert_eq!(wrong.info().await.unwrap_err().code(), Some(tonic::Code::Unauthenticated));
+    let wrong = LandingClient::connect(server.client_config().with_token("beta-token"))
+        .await
+        .expect("connect");
+    assert_eq!(
+        wrong.info().await.unwrap_err().code(),
+        Some(tonic::Code::Unauthenticated)
+    );
 
-    let friend = LandingClient::connect(server.client_config().with_token("alpha-token")).await.expect("connect");
-    assert!(!friend.info().await.expect("info with the token").version.is_empty());
+    let friend = LandingClient::connect(server.client_config().with_token("alpha-token"))
+        .await
+        .expect("connect");
+    assert!(
+        !friend
+            .info()
+            .await
+            .expect("info with the token")
+            .version
+            .is_empty()
+    );
 
     // The CLI maps a refusal to exit 6 and takes the token from --token.
-    assert_eq!(landing(&["--server", &server.url, "info"]).await.0, landing_client::cli::exit::AUTH);
-    assert_eq!(landing(&["--server", &server.url, "--token", "alpha-token", "info"]).await.0, 0);
+    assert_eq!(
+        landing(&["--server", &server.url, "info"]).await.0,
+        landing_client::cli::exit::AUTH
+    );
+    assert_eq!(
+        landing(&["--server", &server.url, "--token", "alpha-token", "info"])
+            .await
+            .0,
+        0
+    );
     server.stop().await;
 }
 
@@ -78,19 +108,38 @@ async fn tls_serves_clients_that_trust_the_ca_only() {
     config.tls.cert_path = write(&unique("tls", "server.pem"), &cert);
     config.tls.key_path = write(&unique("tls", "server.key"), &key);
     let server = TestServer::with_config(config).await;
-    let trusting = TlsConfig { ca_cert_pem: Some(ca.pem()), domain_name: Some("localhost".into()), ..Default::default() };
+    let trusting = TlsConfig {
+        ca_cert_pem: Some(ca.pem()),
+        domain_name: Some("localhost".into()),
+        ..Default::default()
+    };
 
-    let friend = LandingClient::connect(server.client_config().with_tls(trusting)).await.expect("TLS connect");
-    assert!(!friend.info().await.expect("info over TLS").version.is_empty());
+    let friend = LandingClient::connect(server.client_config().with_tls(trusting))
+        .await
+        .expect("TLS connect");
+    assert!(
+        !friend
+            .info()
+            .await
+            .expect("info over TLS")
+            .version
+            .is_empty()
+    );
 
     let stranger_ca = Ca::new("someone else");
-    let distrusting =
-        TlsConfig { ca_cert_pem: Some(stranger_ca.pem()), domain_name: Some("localhost".into()), ..Default::default() };
+    let distrusting = TlsConfig {
+        ca_cert_pem: Some(stranger_ca.pem()),
+        domain_name: Some("localhost".into()),
+        ..Default::default()
+    };
     let err = match LandingClient::connect(server.client_config().with_tls(distrusting)).await {
         Ok(c) => c.info().await.unwrap_err(),
         Err(e) => e,
     };
-    assert!(err.is_unreachable(), "a certificate from an unknown CA is refused: {err}");
+    assert!(
+        err.is_unreachable(),
+        "a certificate from an unknown CA is refused: {err}"
+    );
 
     // Plain HTTP/2 to the TLS port gets nowhere.
     let plain = server.url.replacen("https://", "http://", 1);
@@ -98,12 +147,28 @@ async fn tls_serves_clients_that_trust_the_ca_only() {
         Ok(c) => c.info().await.unwrap_err(),
         Err(e) => e,
     };
-    assert!(matches!(err, ClientError::Unreachable { .. } | ClientError::Status(_)), "{err}");
+    assert!(
+        matches!(
+            err,
+            ClientError::Unreachable { .. } | ClientError::Status(_)
+        ),
+        "{err}"
+    );
 
     // The CLI with --ca-cert and --tls-domain.
     let ca_path = write(&unique("tls", "ca.pem"), &ca.pem());
     let ca_arg = ca_path.to_str().expect("path");
-    let (code, out) = landing(&["--server", &server.url, "--ca-cert", ca_arg, "--tls-domain", "localhost", "info", "--json"]).await;
+    let (code, out) = landing(&[
+        "--server",
+        &server.url,
+        "--ca-cert",
+        ca_arg,
+        "--tls-domain",
+        "localhost",
+        "info",
+        "--json",
+    ])
+    .await;
     assert_eq!(code, 0, "{out}");
     server.stop().await;
 }
@@ -134,8 +199,15 @@ async fn mutual_tls_requires_a_client_certificate_from_the_client_ca() {
         }
     };
 
-    attempt(tls(Some(client_ca.leaf(&["drone-7"])))).await.expect("a client certificate from the client CA");
+    attempt(tls(Some(client_ca.leaf(&["drone-7"]))))
+        .await
+        .expect("a client certificate from the client CA");
     assert!(attempt(tls(None)).await.is_err(), "no client certificate");
-    assert!(attempt(tls(Some(Ca::new("rogue").leaf(&["drone-x"])))).await.is_err(), "a stranger's certificate");
+    assert!(
+        attempt(tls(Some(Ca::new("rogue").leaf(&["drone-x"]))))
+            .await
+            .is_err(),
+        "a stranger's certificate"
+    );
     server.stop().await;
 }

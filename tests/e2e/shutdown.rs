@@ -4,7 +4,9 @@
 use std::time::Duration;
 
 use landing_client::v1::{Frame, SegmentationMode};
-use landing_client::{ClientConfig, ClientError, FrameOutcome, LandingClient, ServingStatus, StreamConfig, StreamItem};
+use landing_client::{
+    ClientConfig, ClientError, FrameOutcome, LandingClient, ServingStatus, StreamConfig, StreamItem,
+};
 
 use crate::support::{TestServer, mode, scene, scratch, server_config};
 
@@ -21,7 +23,11 @@ fn many_frames(n: usize) -> Vec<Frame> {
 }
 
 /// Streams `frames`; calls `stop` after the first answer; returns the answers and the end.
-async fn stream_and_stop<F>(client: &LandingClient, frames: Vec<Frame>, stop: F) -> (Vec<StreamItem>, Option<ClientError>)
+async fn stream_and_stop<F>(
+    client: &LandingClient,
+    frames: Vec<Frame>,
+    stop: F,
+) -> (Vec<StreamItem>, Option<ClientError>)
 where
     F: FnOnce(),
 {
@@ -40,7 +46,10 @@ where
     let mut stop = Some(stop);
     let mut items = Vec::new();
     let mut end = None;
-    while let Some(item) = tokio::time::timeout(Duration::from_secs(120), rx.next()).await.expect("the stream ends") {
+    while let Some(item) = tokio::time::timeout(Duration::from_secs(120), rx.next())
+        .await
+        .expect("the stream ends")
+    {
         match item {
             Ok(i) => {
                 items.push(i);
@@ -60,7 +69,12 @@ fn assert_drained(items: &[StreamItem], end: Option<ClientError>, sent_max: u64)
     assert!(!items.is_empty());
     for (k, i) in items.iter().enumerate() {
         assert_eq!(i.sequence, k as u64, "answers in order, none twice");
-        assert!(matches!(i.outcome, FrameOutcome::Result(_)), "frame {} was drained: {:?}", k, i.outcome.label());
+        assert!(
+            matches!(i.outcome, FrameOutcome::Result(_)),
+            "frame {} was drained: {:?}",
+            k,
+            i.outcome.label()
+        );
     }
     match end {
         None => {}
@@ -81,10 +95,14 @@ async fn shutdown_during_a_stream_drains_it() {
     let client = server.client().await;
     let frames = many_frames(60);
     let mut handle = None;
-    let (items, end) = stream_and_stop(&client, frames, || handle = Some(server.begin_shutdown())).await;
+    let (items, end) =
+        stream_and_stop(&client, frames, || handle = Some(server.begin_shutdown())).await;
     assert!(items.len() < 60, "the shutdown cut the stream short");
     assert_drained(&items, end, 60);
-    handle.expect("shutdown started").await.expect("shutdown finished");
+    handle
+        .expect("shutdown started")
+        .await
+        .expect("shutdown finished");
 }
 
 /// Not a test of its own: the body of the server process that [`sigterm_drains_a_stream`] starts
@@ -92,21 +110,39 @@ async fn shutdown_during_a_stream_drains_it() {
 #[test]
 fn server_process() {
     if let Some(config) = std::env::var_os("LANDING_E2E_SERVER_CONFIG") {
-        let args = ["landing-server".into(), "serve".into(), "--config".into(), config];
+        let args = [
+            "landing-server".into(),
+            "serve".into(),
+            "--config".into(),
+            config,
+        ];
         let code = landing_server::cli::cli_main_from(args);
-        std::process::exit(if code == std::process::ExitCode::SUCCESS { 0 } else { 1 });
+        std::process::exit(if code == std::process::ExitCode::SUCCESS {
+            0
+        } else {
+            1
+        });
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_drains_a_stream() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port();
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind")
+        .local_addr()
+        .expect("addr")
+        .port();
     let mut config = server_config();
     config.server.listen = format!("127.0.0.1:{port}");
     let path = scratch().join(format!("server-{port}.toml"));
     std::fs::write(&path, config.to_toml()).expect("write the config");
     let mut child = std::process::Command::new(std::env::current_exe().expect("test binary"))
-        .args(["shutdown::server_process", "--exact", "--nocapture", "--test-threads=1"])
+        .args([
+            "shutdown::server_process",
+            "--exact",
+            "--nocapture",
+            "--test-threads=1",
+        ])
         .env("LANDING_E2E_SERVER_CONFIG", &path)
         .spawn()
         .expect("start the server process");
@@ -125,11 +161,21 @@ async fn sigterm_drains_a_stream() {
     let client = client.expect("the server process serves within a minute");
     let pid = child.id().to_string();
     let (items, end) = stream_and_stop(&client, many_frames(60), || {
-        let ok = std::process::Command::new("kill").args(["-TERM", &pid]).status().expect("run kill").success();
+        let ok = std::process::Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .expect("run kill")
+            .success();
         assert!(ok, "kill -TERM {pid}");
     })
     .await;
     assert_drained(&items, end, 60);
-    let status = tokio::task::spawn_blocking(move || child.wait()).await.expect("join").expect("wait");
-    assert!(status.success(), "the server exits 0 after draining: {status}");
+    let status = tokio::task::spawn_blocking(move || child.wait())
+        .await
+        .expect("join")
+        .expect("wait");
+    assert!(
+        status.success(),
+        "the server exits 0 after draining: {status}"
+    );
 }

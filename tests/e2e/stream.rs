@@ -10,7 +10,11 @@ use crate::support::{TestServer, check, mode, scene};
 async fn stream_equals_in_process_pipeline_geometry_only() {
     let server = TestServer::start().await;
     let items = check(&server, 21, mode(SegmentationMode::None)).await;
-    assert!(items.iter().all(|i| matches!(i.outcome, FrameOutcome::Result(_))));
+    assert!(
+        items
+            .iter()
+            .all(|i| matches!(i.outcome, FrameOutcome::Result(_)))
+    );
     server.stop().await;
 }
 
@@ -18,7 +22,11 @@ async fn stream_equals_in_process_pipeline_geometry_only() {
 async fn stream_equals_in_process_pipeline_with_true_classes() {
     let server = TestServer::start().await;
     let items = check(&server, 22, mode(SegmentationMode::PointClasses)).await;
-    let sites: usize = items.iter().filter_map(|i| i.outcome.result()).map(|r| r.sites.len()).sum();
+    let sites: usize = items
+        .iter()
+        .filter_map(|i| i.outcome.result())
+        .map(|r| r.sites.len())
+        .sum();
     assert!(sites > 0, "an approach to a roof finds landing sites");
     server.stop().await;
 }
@@ -51,13 +59,27 @@ async fn latest_policy_answers_every_frame_exactly_once() {
     while let Some(item) = rx.next().await {
         let item = item.expect("answer");
         if let FrameOutcome::Skipped { superseded_by } = item.outcome {
-            assert!(superseded_by > item.sequence, "skipped {} for older {superseded_by}", item.sequence);
+            assert!(
+                superseded_by > item.sequence,
+                "skipped {} for older {superseded_by}",
+                item.sequence
+            );
         }
         seen.push(item);
     }
     let seqs: Vec<u64> = seen.iter().map(|i| i.sequence).collect();
-    assert_eq!(seqs, (0..n as u64).collect::<Vec<_>>(), "every frame once, in order");
-    assert!(matches!(seen.last().map(|i| &i.outcome), Some(FrameOutcome::Result(_))), "the newest frame is processed");
+    assert_eq!(
+        seqs,
+        (0..n as u64).collect::<Vec<_>>(),
+        "every frame once, in order"
+    );
+    assert!(
+        matches!(
+            seen.last().map(|i| &i.outcome),
+            Some(FrameOutcome::Result(_))
+        ),
+        "the newest frame is processed"
+    );
     server.stop().await;
 }
 

@@ -7,14 +7,21 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use landing_client::v1::{self, PipelineOptions, SegmentationMode};
-use landing_client::{ClientConfig, FrameOutcome, LandingClient, RetryPolicy, StreamConfig, StreamItem};
+use landing_client::{
+    ClientConfig, FrameOutcome, LandingClient, RetryPolicy, StreamConfig, StreamItem,
+};
 use landing_server::pipeline::Pipeline;
 use landing_server::{Config, RunningServer, convert, run_pipeline};
-use landing_sim::recording::{RecordConfig, RecordedFrame, encode_recording, read_recording_bytes, simulate};
+use landing_sim::recording::{
+    RecordConfig, RecordedFrame, encode_recording, read_recording_bytes, simulate,
+};
 
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("tests/ has a parent").to_path_buf()
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .expect("tests/ has a parent")
+        .to_path_buf()
 }
 
 /// The shipped model and the ONNX Runtime library, when both are in place.
@@ -73,9 +80,17 @@ impl TestServer {
 
     /// Starts the server with `config` on `127.0.0.1:0`.
     pub async fn with_config(config: Config) -> Self {
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.expect("bind 127.0.0.1:0");
-        let running = landing_server::start(config.clone(), listener).await.expect("start the server");
-        let scheme = if config.tls.cert_path.as_os_str().is_empty() { "http" } else { "https" };
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0")
+            .await
+            .expect("bind 127.0.0.1:0");
+        let running = landing_server::start(config.clone(), listener)
+            .await
+            .expect("start the server");
+        let scheme = if config.tls.cert_path.as_os_str().is_empty() {
+            "http"
+        } else {
+            "https"
+        };
         Self {
             url: format!("{scheme}://{}", running.addr),
             config,
@@ -94,7 +109,9 @@ impl TestServer {
 
     /// A connected client.
     pub async fn client(&self) -> LandingClient {
-        LandingClient::connect(self.client_config()).await.expect("connect to the test server")
+        LandingClient::connect(self.client_config())
+            .await
+            .expect("connect to the test server")
     }
 
     /// The same pipeline the server runs (same defaults, same model), in this process.
@@ -146,7 +163,11 @@ pub fn scene(seed: u64) -> Arc<Scene> {
     let mut map = scenes.lock().unwrap_or_else(|e| e.into_inner());
     map.entry(seed)
         .or_insert_with(|| {
-            let mut config = RecordConfig { seed, drone_id: format!("e2e-{seed}"), ..RecordConfig::default() };
+            let mut config = RecordConfig {
+                seed,
+                drone_id: format!("e2e-{seed}"),
+                ..RecordConfig::default()
+            };
             config.flight.frames = SCENE_FRAMES;
             let (world, frames) = simulate(&config).expect("simulate the scene");
             let bytes = encode_recording(&world, &frames, &config).expect("encode the recording");
@@ -161,7 +182,10 @@ pub fn scene(seed: u64) -> Arc<Scene> {
 
 /// Options selecting only a segmentation mode.
 pub fn mode(m: SegmentationMode) -> PipelineOptions {
-    PipelineOptions { segmentation_mode: m as i32, ..Default::default() }
+    PipelineOptions {
+        segmentation_mode: m as i32,
+        ..Default::default()
+    }
 }
 
 /// What the in-process pipeline answers for `frame`: the result, or the gRPC code of its error.
@@ -170,7 +194,10 @@ pub fn in_process(
     frame: &v1::Frame,
     options: &PipelineOptions,
 ) -> Result<v1::FrameResult, tonic::Code> {
-    let request = v1::DetectLandingSitesRequest { frame: Some(frame.clone()), options: Some(options.clone()) };
+    let request = v1::DetectLandingSitesRequest {
+        frame: Some(frame.clone()),
+        options: Some(options.clone()),
+    };
     let status = |e: &landing_server::Error| landing_server::status::to_status(e).code();
     let (f, o) = convert::request_parts(&request, &pipeline.defaults).map_err(|e| status(&e))?;
     let out = run_pipeline(&f, &o, pipeline).map_err(|e| status(&e))?;
@@ -192,7 +219,11 @@ pub async fn check(server: &TestServer, seed: u64, options: PipelineOptions) -> 
 }
 
 /// [`check`] on any frames.
-pub async fn check_frames(server: &TestServer, frames: &[v1::Frame], options: PipelineOptions) -> Vec<StreamItem> {
+pub async fn check_frames(
+    server: &TestServer,
+    frames: &[v1::Frame],
+    options: PipelineOptions,
+) -> Vec<StreamItem> {
     let items = stream_all(server, frames.to_vec(), options.clone()).await;
     assert_eq!(items.len(), frames.len(), "one answer per frame");
     for (item, frame) in items.iter().zip(frames) {
@@ -200,10 +231,20 @@ pub async fn check_frames(server: &TestServer, frames: &[v1::Frame], options: Pi
         let expected = in_process(server.reference(), frame, &options);
         match (&item.outcome, expected) {
             (FrameOutcome::Result(got), Ok(want)) => {
-                assert_eq!(untimed(got.clone()), untimed(want), "frame {}", frame.sequence);
+                assert_eq!(
+                    untimed(got.clone()),
+                    untimed(want),
+                    "frame {}",
+                    frame.sequence
+                );
             }
-            (FrameOutcome::Error(e), Err(code)) => assert_eq!(e.code, code, "frame {}", frame.sequence),
-            (got, want) => panic!("frame {}: stream gave {got:?}, in process {want:?}", frame.sequence),
+            (FrameOutcome::Error(e), Err(code)) => {
+                assert_eq!(e.code, code, "frame {}", frame.sequence)
+            }
+            (got, want) => panic!(
+                "frame {}: stream gave {got:?}, in process {want:?}",
+                frame.sequence
+            ),
         }
     }
     items
@@ -211,9 +252,17 @@ pub async fn check_frames(server: &TestServer, frames: &[v1::Frame], options: Pi
 
 /// Streams `frames` (BLOCK policy, window 4) and collects every answer; panics if the stream
 /// breaks.
-pub async fn stream_all(server: &TestServer, frames: Vec<v1::Frame>, options: PipelineOptions) -> Vec<StreamItem> {
+pub async fn stream_all(
+    server: &TestServer,
+    frames: Vec<v1::Frame>,
+    options: PipelineOptions,
+) -> Vec<StreamItem> {
     let client = server.client().await;
-    let (mut tx, mut rx) = client.open_stream(StreamConfig { options: Some(options), max_in_flight: 4, ..Default::default() });
+    let (mut tx, mut rx) = client.open_stream(StreamConfig {
+        options: Some(options),
+        max_in_flight: 4,
+        ..Default::default()
+    });
     let sender = tokio::spawn(async move {
         for f in frames {
             tx.send(f).await.expect("send a frame");

@@ -19,8 +19,16 @@ pub const EXIT_UNSAFE: u8 = 7;
 #[derive(Debug, Clone, Args)]
 pub struct EvalArgs {
     /// Recordings with ground truth (`landing-sim` MCAP files), or folders of them.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "scenarios")]
     pub recordings: Vec<PathBuf>,
+    /// Generate a scenario set with `landing-sim scenarios` into `<out>/scenarios` first and
+    /// evaluate it: `small` (9 frames over 3 buildings, the CI slice) or `full` (144 frames over
+    /// 36 buildings of 6 Manhattan-distribution worlds).
+    #[arg(long, value_enum)]
+    pub scenarios: Option<ScenarioSet>,
+    /// The `landing-sim` binary for `--scenarios` (default: next to this binary, else on PATH).
+    #[arg(long)]
+    pub sim_bin: Option<PathBuf>,
     /// Folder for summary.md, results.json and the PNG charts.
     #[arg(long, default_value = "eval-out")]
     pub out: PathBuf,
@@ -52,6 +60,82 @@ pub struct EvalArgs {
     pub overlays: bool,
 }
 
+/// The built-in scenario sets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ScenarioSet {
+    /// 1 world, 3 buildings, 3 frames each: the CI slice.
+    Small,
+    /// 6 worlds, 6 buildings each, 4 frames each: 144 approach frames on 36 buildings.
+    Full,
+}
+
+impl ScenarioSet {
+    /// The `landing-sim scenarios` arguments of this set (fixed seed).
+    pub fn sim_args(self) -> [&'static str; 8] {
+        match self {
+            ScenarioSet::Small => [
+                "--seed",
+                "2026",
+                "--worlds",
+                "1",
+                "--buildings",
+                "3",
+                "--frames",
+                "3",
+            ],
+            ScenarioSet::Full => [
+                "--seed",
+                "2026",
+                "--worlds",
+                "6",
+                "--buildings",
+                "6",
+                "--frames",
+                "4",
+            ],
+        }
+    }
+}
+
+/// Runs `landing-sim scenarios` for `set` into `dir`.
+fn generate_scenarios(
+    set: ScenarioSet,
+    sim_bin: Option<&Path>,
+    dir: &Path,
+) -> Result<(), CliError> {
+    let err = |m: String| CliError {
+        code: exit::ERROR,
+        message: m,
+    };
+    let bin = match sim_bin {
+        Some(b) => b.to_path_buf(),
+        None => std::env::current_exe()
+            .ok()
+            .and_then(|e| e.parent().map(|d| d.join("landing-sim")))
+            .filter(|p| p.is_file())
+            .unwrap_or_else(|| PathBuf::from("landing-sim")),
+    };
+    let status = std::process::Command::new(&bin)
+        .arg("scenarios")
+        .args(set.sim_args())
+        .arg("--out")
+        .arg(dir)
+        .status()
+        .map_err(|e| {
+            err(format!(
+                "cannot run `{}` (set --sim-bin): {e}",
+                bin.display()
+            ))
+        })?;
+    if !status.success() {
+        return Err(err(format!(
+            "`{} scenarios` failed: {status}",
+            bin.display()
+        )));
+    }
+    Ok(())
+}
+
 fn parse_mode(s: &str) -> Result<Mode, String> {
     Mode::parse(s).ok_or_else(|| format!("unknown mode `{s}` (expected geometry, model or truth)"))
 }
@@ -64,15 +148,29 @@ pub async fn eval_cmd(
     json: bool,
     out: &mut (dyn Write + Send),
 ) -> Result<u8, CliError> {
-    let usage = |m: String| CliError { code: exit::USAGE, message: m };
+    let usage = |m: String| CliError {
+        code: exit::USAGE,
+        message: m,
+    };
     if !(args.cell > 0.0 && args.cell <= 1.0) {
-        return Err(usage(format!("--cell {} must be in (0, 1] metres", args.cell)));
+        return Err(usage(format!(
+            "--cell {} must be in (0, 1] metres",
+            args.cell
+        )));
     }
-    let files = recording_files(&args.recordings)?;
+    let mut inputs = args.recordings.clone();
+    if let Some(set) = args.scenarios {
+        let dir = args.out.join("scenarios");
+        generate_scenarios(set, args.sim_bin.as_deref(), &dir)?;
+        inputs.push(dir);
+    }
+    let files = recording_files(&inputs)?;
     let mut scenarios = load_scenarios(&files)?;
     if args.limit > 0 && scenarios.len() > args.limit {
         let step = scenarios.len() as f64 / args.limit as f64;
-        scenarios = (0..args.limit).map(|k| scenarios[(k as f64 * step) as usize].clone()).collect();
+        scenarios = (0..args.limit)
+            .map(|k| scenarios[(k as f64 * step) as usize].clone())
+            .collect();
     }
     let config = EvalConfig {
         modes: args.modes.clone(),
@@ -103,9 +201,15 @@ pub async fn eval_cmd(
     let summary = summarize(&records, &failures, &args.modes);
     let targets = Targets::default();
     let md = write_report(&args.out, &summary, &records, &targets, &args.gate)?;
-    let io = |e: std::io::Error| CliError { code: exit::ERROR, message: format!("cannot write output: {e}") };
+    let io = |e: std::io::Error| CliError {
+        code: exit::ERROR,
+        message: format!("cannot write output: {e}"),
+    };
     if json {
-        let v = serde_json::to_string_pretty(&summary).map_err(|e| CliError { code: exit::ERROR, message: e.to_string() })?;
+        let v = serde_json::to_string_pretty(&summary).map_err(|e| CliError {
+            code: exit::ERROR,
+            message: e.to_string(),
+        })?;
         writeln!(out, "{v}").map_err(io)?;
     } else {
         write!(out, "{}", summary.to_text()).map_err(io)?;
@@ -118,7 +222,11 @@ pub async fn eval_cmd(
     }
     let _ = md;
     let gate_failed = args.gate.iter().any(|g| {
-        summary.modes.iter().find(|m| m.mode == *g).is_none_or(|m| m.unsafe_sites() > 0 || m.frames == 0)
+        summary
+            .modes
+            .iter()
+            .find(|m| m.mode == *g)
+            .is_none_or(|m| m.unsafe_sites() > 0 || m.frames == 0)
     });
     Ok(if gate_failed { EXIT_UNSAFE } else { exit::OK })
 }
@@ -129,7 +237,10 @@ pub fn recording_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, ClientError> {
     for p in paths {
         if p.is_dir() {
             let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| ClientError::Io { path: p.display().to_string(), source: e })?
+                .map_err(|e| ClientError::Io {
+                    path: p.display().to_string(),
+                    source: e,
+                })?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
                 .collect();
@@ -140,12 +251,18 @@ pub fn recording_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, ClientError> {
         }
     }
     if out.is_empty() {
-        return Err(ClientError::InvalidInput { field: "recordings", reason: format!("no .mcap files in {paths:?}") });
+        return Err(ClientError::InvalidInput {
+            field: "recordings",
+            reason: format!("no .mcap files in {paths:?}"),
+        });
     }
     Ok(out)
 }
 
 /// File name of `path` for scenario names.
 pub(crate) fn short_name(path: &Path) -> String {
-    path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned())
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }

@@ -11,8 +11,9 @@
 /// A point in the horizontal plane (world x, y), metres.
 pub type P2 = [f64; 2];
 
-/// A polygon with holes in the horizontal plane. Orientation does not matter: membership uses the
-/// even-odd rule over all rings, so holes must lie inside the shell and not overlap each other.
+/// A polygon with holes in the horizontal plane. Orientation does not matter: a point belongs to
+/// the polygon when it is inside the shell and inside no hole, so a hole that overlaps another or
+/// reaches past the shell still only removes area.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Polygon2 {
     /// The outer ring, not closed (the last point is not a copy of the first).
@@ -24,7 +25,10 @@ pub struct Polygon2 {
 impl Polygon2 {
     /// A polygon without holes.
     pub fn simple(shell: Vec<P2>) -> Self {
-        Self { shell, holes: Vec::new() }
+        Self {
+            shell,
+            holes: Vec::new(),
+        }
     }
 
     /// An axis-aligned rectangle.
@@ -39,12 +43,14 @@ impl Polygon2 {
 
     /// True when `p` is inside the shell and outside every hole.
     pub fn contains(&self, p: P2) -> bool {
-        self.rings().filter(|r| ring_contains(r, p)).count() % 2 == 1
+        ring_contains(&self.shell, p) && !self.holes.iter().any(|h| ring_contains(h, p))
     }
 
     /// Distance from `p` to the nearest edge of any ring.
     pub fn boundary_distance(&self, p: P2) -> f64 {
-        self.rings().map(|r| ring_distance(r, p)).fold(f64::INFINITY, f64::min)
+        self.rings()
+            .map(|r| ring_distance(r, p))
+            .fold(f64::INFINITY, f64::min)
     }
 
     /// Signed distance from `p` to the polygon: positive inside (distance to the nearest edge),
@@ -56,7 +62,8 @@ impl Polygon2 {
 
     /// Area of the shell minus the holes.
     pub fn area(&self) -> f64 {
-        signed_area(&self.shell).abs() - self.holes.iter().map(|h| signed_area(h).abs()).sum::<f64>()
+        signed_area(&self.shell).abs()
+            - self.holes.iter().map(|h| signed_area(h).abs()).sum::<f64>()
     }
 
     /// Axis-aligned bounds `(min, max)` of the shell; `None` when it has no points.
@@ -66,7 +73,11 @@ impl Polygon2 {
 
     /// True when every coordinate is finite and the shell has at least three points.
     pub fn is_usable(&self) -> bool {
-        self.shell.len() >= 3 && self.rings().flatten().all(|p| p[0].is_finite() && p[1].is_finite())
+        self.shell.len() >= 3
+            && self
+                .rings()
+                .flatten()
+                .all(|p| p[0].is_finite() && p[1].is_finite())
     }
 }
 
@@ -74,7 +85,10 @@ impl Polygon2 {
 pub fn bounds_of(points: &[P2]) -> Option<(P2, P2)> {
     let first = *points.first()?;
     Some(points.iter().fold((first, first), |(lo, hi), p| {
-        ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])])
+        (
+            [lo[0].min(p[0]), lo[1].min(p[1])],
+            [hi[0].max(p[0]), hi[1].max(p[1])],
+        )
     }))
 }
 
@@ -98,14 +112,20 @@ pub fn ring_contains(ring: &[P2], p: P2) -> bool {
 /// Distance from `p` to the nearest edge of a closed ring.
 pub fn ring_distance(ring: &[P2], p: P2) -> f64 {
     let n = ring.len();
-    (0..n).map(|i| segment_distance(p, ring[i], ring[(i + 1) % n])).fold(f64::INFINITY, f64::min)
+    (0..n)
+        .map(|i| segment_distance(p, ring[i], ring[(i + 1) % n]))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Distance from `p` to the segment `a`-`b`.
 pub fn segment_distance(p: P2, a: P2, b: P2) -> f64 {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 { (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let (qx, qy) = (a[0] + t * dx, a[1] + t * dy);
     ((p[0] - qx).powi(2) + (p[1] - qy).powi(2)).sqrt()
 }
@@ -113,18 +133,23 @@ pub fn segment_distance(p: P2, a: P2, b: P2) -> f64 {
 /// Shoelace area, positive for counter-clockwise rings.
 pub fn signed_area(ring: &[P2]) -> f64 {
     let n = ring.len();
-    (0..n).map(|i| {
-        let (a, b) = (ring[i], ring[(i + 1) % n]);
-        a[0] * b[1] - b[0] * a[1]
-    })
-    .sum::<f64>()
+    (0..n)
+        .map(|i| {
+            let (a, b) = (ring[i], ring[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum::<f64>()
         / 2.0
 }
 
 /// Convex hull (Andrew's monotone chain), counter-clockwise, without collinear points. Fewer
 /// than three distinct points give what there is.
 pub fn convex_hull(points: &[P2]) -> Vec<P2> {
-    let mut pts: Vec<P2> = points.iter().copied().filter(|p| p[0].is_finite() && p[1].is_finite()).collect();
+    let mut pts: Vec<P2> = points
+        .iter()
+        .copied()
+        .filter(|p| p[0].is_finite() && p[1].is_finite())
+        .collect();
     pts.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     pts.dedup();
     if pts.len() < 3 {
@@ -134,10 +159,15 @@ pub fn convex_hull(points: &[P2]) -> Vec<P2> {
     let mut hull: Vec<P2> = Vec::with_capacity(pts.len() * 2);
     for pass in 0..2 {
         let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &P2>> =
-            if pass == 0 { Box::new(pts.iter()) } else { Box::new(pts.iter().rev()) };
+        let iter: Box<dyn Iterator<Item = &P2>> = if pass == 0 {
+            Box::new(pts.iter())
+        } else {
+            Box::new(pts.iter().rev())
+        };
         for &p in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0
+            {
                 hull.pop();
             }
             hull.push(p);
@@ -165,7 +195,8 @@ impl Grid {
     /// The grid of `cell_m` cells covering `min..max` grown by `margin_m` on every side; `None`
     /// when the bounds are not finite or the grid would exceed [`MAX_GRID_CELLS`].
     pub fn covering(min: P2, max: P2, cell_m: f64, margin_m: f64) -> Option<Grid> {
-        let ok = min.iter().chain(max.iter()).all(|v| v.is_finite()) && cell_m > 0.0 && margin_m >= 0.0;
+        let ok =
+            min.iter().chain(max.iter()).all(|v| v.is_finite()) && cell_m > 0.0 && margin_m >= 0.0;
         if !ok || max[0] < min[0] || max[1] < min[1] {
             return None;
         }
@@ -176,12 +207,21 @@ impl Grid {
         if nx * ny > MAX_GRID_CELLS as f64 {
             return None;
         }
-        Some(Grid { x0, y0, cell_m, nx: nx as usize, ny: ny as usize })
+        Some(Grid {
+            x0,
+            y0,
+            cell_m,
+            nx: nx as usize,
+            ny: ny as usize,
+        })
     }
 
     /// Centre of cell `(i, j)`.
     pub fn center(&self, i: usize, j: usize) -> P2 {
-        [self.x0 + (i as f64 + 0.5) * self.cell_m, self.y0 + (j as f64 + 0.5) * self.cell_m]
+        [
+            self.x0 + (i as f64 + 0.5) * self.cell_m,
+            self.y0 + (j as f64 + 0.5) * self.cell_m,
+        ]
     }
 
     /// Area of one cell, square metres.
@@ -200,41 +240,37 @@ pub struct Mask {
 impl Mask {
     /// No cell set.
     pub fn empty(grid: Grid) -> Self {
-        Self { grid, cells: vec![false; grid.nx * grid.ny] }
+        Self {
+            grid,
+            cells: vec![false; grid.nx * grid.ny],
+        }
     }
 
-    /// The cells of `polygon` (even-odd over its rings).
+    /// The cells of `polygon` (inside the shell, outside every hole).
     pub fn of_polygon(grid: Grid, polygon: &Polygon2) -> Self {
         let mut m = Self::empty(grid);
         m.add_polygon(polygon);
         m
     }
 
-    /// Sets every cell whose centre is inside `polygon` (scanline fill, even-odd).
+    /// Sets every cell whose centre is inside `polygon`: scanline fill of the shell (even-odd),
+    /// then each hole cleared from that row.
     pub fn add_polygon(&mut self, polygon: &Polygon2) {
         let g = self.grid;
         let mut xs: Vec<f64> = Vec::new();
+        let mut row = vec![false; g.nx];
         for j in 0..g.ny {
             let y = g.y0 + (j as f64 + 0.5) * g.cell_m;
-            xs.clear();
-            for ring in polygon.rings() {
-                let n = ring.len();
-                for k in 0..n {
-                    let (a, b) = (ring[k], ring[(k + 1) % n]);
-                    if (a[1] > y) != (b[1] > y) {
-                        xs.push(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]));
-                    }
-                }
+            row.fill(false);
+            fill_ring_row(&polygon.shell, y, &g, &mut xs, &mut row, true);
+            if !row.iter().any(|c| *c) {
+                continue;
             }
-            xs.sort_by(f64::total_cmp);
-            for pair in xs.chunks_exact(2) {
-                // Cells whose centre x lies in [pair[0], pair[1]).
-                let i0 = ((pair[0] - g.x0) / g.cell_m - 0.5).ceil().max(0.0);
-                let i1 = ((pair[1] - g.x0) / g.cell_m - 0.5).ceil().min(g.nx as f64);
-                if i1 > i0 {
-                    let row = j * g.nx;
-                    self.cells[row + i0 as usize..row + i1 as usize].fill(true);
-                }
+            for hole in &polygon.holes {
+                fill_ring_row(hole, y, &g, &mut xs, &mut row, false);
+            }
+            for (cell, set) in self.cells[j * g.nx..(j + 1) * g.nx].iter_mut().zip(&row) {
+                *cell |= *set;
             }
         }
     }
@@ -242,19 +278,28 @@ impl Mask {
     /// Keeps only cells also set in `other` (same grid).
     pub fn and(&mut self, other: &Mask) {
         debug_assert_eq!(self.grid, other.grid);
-        self.cells.iter_mut().zip(&other.cells).for_each(|(a, b)| *a &= *b);
+        self.cells
+            .iter_mut()
+            .zip(&other.cells)
+            .for_each(|(a, b)| *a &= *b);
     }
 
     /// Sets cells also set in `other` (same grid).
     pub fn or(&mut self, other: &Mask) {
         debug_assert_eq!(self.grid, other.grid);
-        self.cells.iter_mut().zip(&other.cells).for_each(|(a, b)| *a |= *b);
+        self.cells
+            .iter_mut()
+            .zip(&other.cells)
+            .for_each(|(a, b)| *a |= *b);
     }
 
     /// Clears cells set in `other` (same grid).
     pub fn and_not(&mut self, other: &Mask) {
         debug_assert_eq!(self.grid, other.grid);
-        self.cells.iter_mut().zip(&other.cells).for_each(|(a, b)| *a &= !*b);
+        self.cells
+            .iter_mut()
+            .zip(&other.cells)
+            .for_each(|(a, b)| *a &= !*b);
     }
 
     /// Number of set cells.
@@ -269,7 +314,11 @@ impl Mask {
 
     /// Number of cells set in both masks (same grid).
     pub fn intersection_count(&self, other: &Mask) -> usize {
-        self.cells.iter().zip(&other.cells).filter(|(a, b)| **a && **b).count()
+        self.cells
+            .iter()
+            .zip(&other.cells)
+            .filter(|(a, b)| **a && **b)
+            .count()
     }
 
     /// Intersection over union with `other` (same grid); `None` when both are empty.
@@ -330,6 +379,27 @@ impl Mask {
     }
 }
 
+/// Writes `value` into the cells of `row` (at height `y`) whose centres are inside `ring`.
+fn fill_ring_row(ring: &[P2], y: f64, g: &Grid, xs: &mut Vec<f64>, row: &mut [bool], value: bool) {
+    xs.clear();
+    let n = ring.len();
+    for k in 0..n {
+        let (a, b) = (ring[k], ring[(k + 1) % n]);
+        if (a[1] > y) != (b[1] > y) {
+            xs.push(a[0] + (y - a[1]) / (b[1] - a[1]) * (b[0] - a[0]));
+        }
+    }
+    xs.sort_by(f64::total_cmp);
+    for pair in xs.chunks_exact(2) {
+        // Cells whose centre x lies in [pair[0], pair[1]).
+        let i0 = ((pair[0] - g.x0) / g.cell_m - 0.5).ceil().max(0.0);
+        let i1 = ((pair[1] - g.x0) / g.cell_m - 0.5).ceil().min(g.nx as f64);
+        if i1 > i0 {
+            row[i0 as usize..i1 as usize].fill(value);
+        }
+    }
+}
+
 /// Felzenszwalb-Huttenlocher lower envelope of parabolas: `out[q] = min_p (q - p)² + f[p]`.
 fn distance_transform_1d(f: &[f64], out: &mut [f64]) {
     let n = f.len();
@@ -381,12 +451,20 @@ mod tests {
     use super::*;
 
     fn square(c: P2, half: f64) -> Vec<P2> {
-        vec![[c[0] - half, c[1] - half], [c[0] + half, c[1] - half], [c[0] + half, c[1] + half], [c[0] - half, c[1] + half]]
+        vec![
+            [c[0] - half, c[1] - half],
+            [c[0] + half, c[1] - half],
+            [c[0] + half, c[1] + half],
+            [c[0] - half, c[1] + half],
+        ]
     }
 
     #[test]
     fn contains_respects_holes() {
-        let p = Polygon2 { shell: square([0.0, 0.0], 5.0), holes: vec![square([0.0, 0.0], 1.0)] };
+        let p = Polygon2 {
+            shell: square([0.0, 0.0], 5.0),
+            holes: vec![square([0.0, 0.0], 1.0)],
+        };
         assert!(p.contains([3.0, 0.0]));
         assert!(!p.contains([0.0, 0.0]));
         assert!(!p.contains([6.0, 0.0]));
@@ -396,12 +474,32 @@ mod tests {
     }
 
     #[test]
+    fn a_hole_reaching_past_the_shell_only_removes_area() {
+        let p = Polygon2 {
+            shell: square([0.0, 0.0], 2.0),
+            holes: vec![square([2.0, 0.0], 1.0)],
+        };
+        assert!(!p.contains([2.5, 0.0]) && !p.contains([1.5, 0.0]) && p.contains([0.0, 0.0]));
+        let g = Grid::covering([-3.0, -3.0], [4.0, 3.0], 0.05, 0.0).unwrap();
+        let m = Mask::of_polygon(g, &p);
+        assert!((m.area() - 14.0).abs() < 0.2, "{}", m.area());
+    }
+
+    #[test]
     fn raster_area_matches_exact_area() {
-        let p = Polygon2 { shell: square([1.3, -2.1], 5.0), holes: vec![square([2.0, -2.0], 1.5)] };
+        let p = Polygon2 {
+            shell: square([1.3, -2.1], 5.0),
+            holes: vec![square([2.0, -2.0], 1.5)],
+        };
         let (lo, hi) = p.bounds().unwrap();
         let g = Grid::covering(lo, hi, 0.05, 1.0).unwrap();
         let m = Mask::of_polygon(g, &p);
-        assert!((m.area() - p.area()).abs() < 0.5, "{} vs {}", m.area(), p.area());
+        assert!(
+            (m.area() - p.area()).abs() < 0.5,
+            "{} vs {}",
+            m.area(),
+            p.area()
+        );
         // A triangle: half the square.
         let t = Polygon2::simple(vec![[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]);
         let g = Grid::covering([0.0, 0.0], [10.0, 10.0], 0.05, 0.0).unwrap();
@@ -414,7 +512,9 @@ mod tests {
         let a = Polygon2::rect([0.0, 0.0], [4.0, 4.0]);
         let b = Polygon2::rect([2.0, 0.0], [6.0, 4.0]);
         let g = Grid::covering([0.0, 0.0], [6.0, 4.0], 0.05, 0.5).unwrap();
-        let iou = Mask::of_polygon(g, &a).iou(&Mask::of_polygon(g, &b)).unwrap();
+        let iou = Mask::of_polygon(g, &a)
+            .iou(&Mask::of_polygon(g, &b))
+            .unwrap();
         assert!((iou - 1.0 / 3.0).abs() < 0.01, "{iou}");
         assert_eq!(Mask::empty(g).iou(&Mask::empty(g)), None);
     }
@@ -423,12 +523,20 @@ mod tests {
     fn inscribed_circle_of_a_square_with_a_hole() {
         // 10x10 square: radius 5 at the centre.
         let g = Grid::covering([0.0, 0.0], [10.0, 10.0], 0.05, 1.0).unwrap();
-        let (c, r) = Mask::of_polygon(g, &Polygon2::rect([0.0, 0.0], [10.0, 10.0])).largest_inscribed_circle().unwrap();
+        let (c, r) = Mask::of_polygon(g, &Polygon2::rect([0.0, 0.0], [10.0, 10.0]))
+            .largest_inscribed_circle()
+            .unwrap();
         assert!((r - 5.0).abs() < 0.06, "{r}");
-        assert!((c[0] - 5.0).abs() < 0.1 && (c[1] - 5.0).abs() < 0.1, "{c:?}");
+        assert!(
+            (c[0] - 5.0).abs() < 0.1 && (c[1] - 5.0).abs() < 0.1,
+            "{c:?}"
+        );
         // A 20x10 rectangle with a 2x2 obstacle in the middle of the left half: the best circle
         // sits in the right half, radius 5.
-        let p = Polygon2 { shell: Polygon2::rect([0.0, 0.0], [20.0, 10.0]).shell, holes: vec![square([5.0, 5.0], 1.0)] };
+        let p = Polygon2 {
+            shell: Polygon2::rect([0.0, 0.0], [20.0, 10.0]).shell,
+            holes: vec![square([5.0, 5.0], 1.0)],
+        };
         let g = Grid::covering([0.0, 0.0], [20.0, 10.0], 0.05, 0.0).unwrap();
         let (c, r) = Mask::of_polygon(g, &p).largest_inscribed_circle().unwrap();
         assert!((r - 5.0).abs() < 0.06, "{r}");
@@ -438,7 +546,15 @@ mod tests {
 
     #[test]
     fn convex_hull_drops_inner_points() {
-        let pts = [[0.0, 0.0], [4.0, 0.0], [4.0, 4.0], [0.0, 4.0], [2.0, 2.0], [1.0, 3.0], [2.0, 0.0]];
+        let pts = [
+            [0.0, 0.0],
+            [4.0, 0.0],
+            [4.0, 4.0],
+            [0.0, 4.0],
+            [2.0, 2.0],
+            [1.0, 3.0],
+            [2.0, 0.0],
+        ];
         let h = convex_hull(&pts);
         assert_eq!(h.len(), 4, "{h:?}");
         assert!((signed_area(&h) - 16.0).abs() < 1e-9);
@@ -455,14 +571,22 @@ mod tests {
             state
         };
         for _ in 0..20 {
-            let g = Grid { x0: 0.0, y0: 0.0, cell_m: 1.0, nx: 13, ny: 9 };
+            let g = Grid {
+                x0: 0.0,
+                y0: 0.0,
+                cell_m: 1.0,
+                nx: 13,
+                ny: 9,
+            };
             let mut m = Mask::empty(g);
             for c in m.cells.iter_mut() {
                 *c = next() % 5 != 0;
             }
             let unset: Vec<(f64, f64)> = (-1..=13i32)
                 .flat_map(|i| (-1..=9i32).map(move |j| (i, j)))
-                .filter(|&(i, j)| i < 0 || j < 0 || i >= 13 || j >= 9 || !m.get(i as usize, j as usize))
+                .filter(|&(i, j)| {
+                    i < 0 || j < 0 || i >= 13 || j >= 9 || !m.get(i as usize, j as usize)
+                })
                 .map(|(i, j)| (f64::from(i), f64::from(j)))
                 .collect();
             let mut best = 0.0f64;

@@ -20,11 +20,20 @@ pub struct MetricsParams {
     pub min_truth_radius_m: f64,
     /// Obstacles with less footprint than this inside the scanned area are not scored.
     pub min_obstacle_area_m2: f64,
+    /// A site off every listed roof whose plane is below this height (world z) is on the ground;
+    /// above it, it is on a building the ground truth does not list.
+    pub ground_max_height_m: f64,
 }
 
 impl Default for MetricsParams {
     fn default() -> Self {
-        Self { cell_m: 0.05, tolerance_m: 0.5, min_truth_radius_m: 1.0, min_obstacle_area_m2: 0.05 }
+        Self {
+            cell_m: 0.05,
+            tolerance_m: 0.5,
+            min_truth_radius_m: 1.0,
+            min_obstacle_area_m2: 0.05,
+            ground_max_height_m: 1.0,
+        }
     }
 }
 
@@ -88,17 +97,29 @@ pub enum Verdict {
     Safe,
     /// The circle reaches `intrusion_m` into an obstacle of class `class`; `seen` tells whether
     /// any LiDAR point hit that obstacle.
-    Obstacle { class: u8, intrusion_m: f64, seen: bool },
+    Obstacle {
+        class: u8,
+        intrusion_m: f64,
+        seen: bool,
+    },
     /// The circle reaches `intrusion_m` past the edge of the walkable roof.
     OutsideRoof { intrusion_m: f64 },
-    /// The centre is on no roof of the ground truth (the street, or a roof not in view).
+    /// The centre is on no roof and the plane is at ground level (the street).
     OffRoof,
+    /// The centre is on no roof of the ground truth but the plane is above the ground: a building
+    /// the truth does not list (too few LiDAR points on it). Not judged either way.
+    UnlistedRoof,
 }
 
 impl Verdict {
     /// True for [`Verdict::Safe`].
     pub fn is_safe(&self) -> bool {
         matches!(self, Verdict::Safe)
+    }
+
+    /// True for the verdicts that count as unsafe (everything but safe and unjudged).
+    pub fn is_unsafe(&self) -> bool {
+        !matches!(self, Verdict::Safe | Verdict::UnlistedRoof)
     }
 }
 
@@ -109,6 +130,9 @@ pub struct SiteEval {
     pub radius_m: f64,
     /// Index of the roof (in the frame's truth) the centre lies on.
     pub roof: Option<usize>,
+    /// Height of the site's plane above that roof, metres (about 0 on the roof itself; an
+    /// obstacle's height when the plane is the top of an obstacle).
+    pub height_above_roof_m: Option<f64>,
     pub verdict: Verdict,
 }
 
@@ -166,7 +190,9 @@ pub fn roof_of(site: &Site, roofs: &[RoofTruth]) -> Option<usize> {
         .enumerate()
         .filter(|(_, r)| r.outline.contains(site.center))
         .min_by(|(_, a), (_, b)| {
-            (a.height_m - site.plane_height_m).abs().total_cmp(&(b.height_m - site.plane_height_m).abs())
+            (a.height_m - site.plane_height_m)
+                .abs()
+                .total_cmp(&(b.height_m - site.plane_height_m).abs())
         })
         .map(|(i, _)| i)
 }
@@ -175,10 +201,17 @@ pub fn roof_of(site: &Site, roofs: &[RoofTruth]) -> Option<usize> {
 pub fn judge_site(site: &Site, roofs: &[RoofTruth], params: &MetricsParams) -> SiteEval {
     let roof = roof_of(site, roofs);
     let verdict = match roof {
-        None => Verdict::OffRoof,
+        None if site.plane_height_m < params.ground_max_height_m => Verdict::OffRoof,
+        None => Verdict::UnlistedRoof,
         Some(i) => judge_on_roof(site.center, site.radius_m, &roofs[i], params.tolerance_m),
     };
-    SiteEval { rank: site.rank, radius_m: site.radius_m, roof, verdict }
+    SiteEval {
+        rank: site.rank,
+        radius_m: site.radius_m,
+        roof,
+        height_above_roof_m: roof.map(|i| site.plane_height_m - roofs[i].height_m),
+        verdict,
+    }
 }
 
 /// The verdict for a circle at `center` of `radius_m` on `roof`: the deepest intrusion wins.
@@ -190,7 +223,11 @@ pub fn judge_on_roof(center: P2, radius_m: f64, roof: &RoofTruth, tolerance_m: f
         let intrusion = radius_m + o.footprint.signed_distance(center);
         if intrusion > worst_intrusion {
             worst_intrusion = intrusion;
-            worst = Verdict::Obstacle { class: o.class, intrusion_m: intrusion, seen: o.seen };
+            worst = Verdict::Obstacle {
+                class: o.class,
+                intrusion_m: intrusion,
+                seen: o.seen,
+            };
         }
     }
     let edge = radius_m - roof.interior.signed_distance(center);
@@ -218,16 +255,25 @@ pub fn landable_mask(grid: Grid, roof: &RoofTruth) -> Mask {
 /// Scores every site, roof and obstacle of one frame.
 pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParams) -> FrameEval {
     let site_evals: Vec<SiteEval> = sites.iter().map(|s| judge_site(s, roofs, params)).collect();
-    let mut out = FrameEval { sites: site_evals, ..Default::default() };
+    let mut out = FrameEval {
+        sites: site_evals,
+        ..Default::default()
+    };
     for (ri, roof) in roofs.iter().enumerate() {
-        let on_roof: Vec<usize> = (0..sites.len()).filter(|&k| out.sites[k].roof == Some(ri)).collect();
+        let on_roof: Vec<usize> = (0..sites.len())
+            .filter(|&k| out.sites[k].roof == Some(ri))
+            .collect();
         // The grid holds the roof and every polygon matched to it, so spill-over counts as error.
         let mut pts: Vec<P2> = roof.outline.shell.clone();
         for &k in &on_roof {
             pts.extend(sites[k].polygon.shell.iter().copied());
         }
-        let Some((lo, hi)) = super::geom::bounds_of(&pts) else { continue };
-        let Some(grid) = Grid::covering(lo, hi, params.cell_m, 2.0 * params.cell_m) else { continue };
+        let Some((lo, hi)) = super::geom::bounds_of(&pts) else {
+            continue;
+        };
+        let Some(grid) = Grid::covering(lo, hi, params.cell_m, 2.0 * params.cell_m) else {
+            continue;
+        };
         let truth = landable_mask(grid, roof);
         let mut returned = Mask::empty(grid);
         for &k in &on_roof {
@@ -292,7 +338,11 @@ mod tests {
             outline: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
             interior: Polygon2::rect([0.3, 0.3], [19.7, 9.7]),
             height_m: 30.0,
-            obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
+            obstacles: vec![Obstacle {
+                class: 8,
+                footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]),
+                seen: true,
+            }],
             scanned: None,
             stated_best_radius_m: None,
             scored: true,
@@ -301,13 +351,22 @@ mod tests {
     }
 
     fn site(center: P2, radius_m: f64, polygon: Polygon2) -> Site {
-        Site { rank: 1, polygon, center, plane_height_m: 30.0, radius_m }
+        Site {
+            rank: 1,
+            polygon,
+            center,
+            plane_height_m: 30.0,
+            radius_m,
+        }
     }
 
     #[test]
     fn a_circle_clear_of_everything_is_safe() {
         let s = site([15.0, 5.0], 4.6, Polygon2::default());
-        assert_eq!(judge_site(&s, &[roof()], &MetricsParams::default()).verdict, Verdict::Safe);
+        assert_eq!(
+            judge_site(&s, &[roof()], &MetricsParams::default()).verdict,
+            Verdict::Safe
+        );
     }
 
     #[test]
@@ -315,7 +374,9 @@ mod tests {
         // Centre 1.5 m from the AC unit's edge with radius 2.5: 1 m into it, beyond 0.5 m.
         let s = site([7.5, 5.0], 2.5, Polygon2::default());
         match judge_site(&s, &[roof()], &MetricsParams::default()).verdict {
-            Verdict::Obstacle { class, intrusion_m, .. } => {
+            Verdict::Obstacle {
+                class, intrusion_m, ..
+            } => {
                 assert_eq!(class, 8);
                 assert!((intrusion_m - 1.0).abs() < 1e-9);
             }
@@ -323,7 +384,11 @@ mod tests {
         }
         // 0.4 m in is within the declared precision.
         let s = site([7.5, 5.0], 1.9, Polygon2::default());
-        assert!(judge_site(&s, &[roof()], &MetricsParams::default()).verdict.is_safe());
+        assert!(
+            judge_site(&s, &[roof()], &MetricsParams::default())
+                .verdict
+                .is_safe()
+        );
         // A centre inside the obstacle reaches radius + depth in.
         let s = site([5.0, 5.0], 0.2, Polygon2::default());
         assert!(matches!(
@@ -339,16 +404,26 @@ mod tests {
             judge_site(&s, &[roof()], &MetricsParams::default()).verdict,
             Verdict::OutsideRoof { intrusion_m } if (intrusion_m - 0.8).abs() < 1e-9
         ));
-        let s = site([25.0, 5.0], 1.0, Polygon2::default());
+        let mut s = site([25.0, 5.0], 1.0, Polygon2::default());
+        s.plane_height_m = 0.05;
         let e = judge_site(&s, &[roof()], &MetricsParams::default());
         assert_eq!((e.roof, e.verdict), (None, Verdict::OffRoof));
+        assert!(e.verdict.is_unsafe());
+        // Off every listed roof but 20 m up: a building the truth does not list, not judged.
+        s.plane_height_m = 20.0;
+        let v = judge_site(&s, &[roof()], &MetricsParams::default()).verdict;
+        assert_eq!(v, Verdict::UnlistedRoof);
+        assert!(!v.is_unsafe() && !v.is_safe());
     }
 
     #[test]
     fn perfect_answer_scores_one() {
         // The exact landable polygon with the true best circle: IoU 1, ratio 1.
         let r = roof();
-        let polygon = Polygon2 { shell: r.interior.shell.clone(), holes: vec![r.obstacles[0].footprint.shell.clone()] };
+        let polygon = Polygon2 {
+            shell: r.interior.shell.clone(),
+            holes: vec![r.obstacles[0].footprint.shell.clone()],
+        };
         let s = site([14.85, 5.0], 4.7, polygon);
         let e = evaluate_frame(&[s], &[r], &MetricsParams::default());
         assert_eq!(e.roofs.len(), 1);
@@ -357,7 +432,11 @@ mod tests {
         assert!((roof.truth_radius_m - 4.7).abs() < 0.06, "{roof:?}");
         assert!((roof.radius_ratio - 1.0).abs() < 0.02, "{roof:?}");
         assert_eq!(e.obstacles.len(), 1);
-        assert!(e.obstacles[0].covered_fraction < 0.05 && !e.obstacles[0].hit, "{:?}", e.obstacles[0]);
+        assert!(
+            e.obstacles[0].covered_fraction < 0.05 && !e.obstacles[0].hit,
+            "{:?}",
+            e.obstacles[0]
+        );
     }
 
     #[test]
@@ -365,14 +444,27 @@ mod tests {
         // Geometry alone sees through a tarp: the polygon has no hole and the circle sits on it.
         let mut r = roof();
         r.obstacles[0].class = 13;
-        let s = site([6.0, 5.0], 4.7, Polygon2 { shell: r.interior.shell.clone(), holes: vec![] });
+        let s = site(
+            [6.0, 5.0],
+            4.7,
+            Polygon2 {
+                shell: r.interior.shell.clone(),
+                holes: vec![],
+            },
+        );
         let e = evaluate_frame(&[s], &[r], &MetricsParams::default());
-        assert!(matches!(e.sites[0].verdict, Verdict::Obstacle { class: 13, .. }));
+        assert!(matches!(
+            e.sites[0].verdict,
+            Verdict::Obstacle { class: 13, .. }
+        ));
         assert!(e.obstacles[0].hit && e.obstacles[0].covered_fraction > 0.95);
         // Unsafe sites do not count towards the radius ratio; the polygon still overlaps mostly.
         assert_eq!(e.roofs[0].radius_ratio, 0.0);
         let iou = e.roofs[0].iou;
-        assert!((iou - (19.4 * 9.4 - 4.0) / (19.4 * 9.4)).abs() < 0.01, "{iou}");
+        assert!(
+            (iou - (19.4 * 9.4 - 4.0) / (19.4 * 9.4)).abs() < 0.01,
+            "{iou}"
+        );
     }
 
     #[test]

@@ -12,15 +12,32 @@ const MARGIN: i64 = 20;
 const LEGEND: i64 = 40;
 
 /// Draws the frame; `None` when there is nothing to draw.
-pub fn draw_overlay(title: &str, roofs: &[RoofTruth], sites: &[Site], evals: &[SiteEval]) -> Option<Canvas> {
-    let mut pts: Vec<P2> = roofs.iter().flat_map(|r| r.outline.shell.iter().copied()).collect();
+pub fn draw_overlay(
+    title: &str,
+    roofs: &[RoofTruth],
+    sites: &[Site],
+    evals: &[SiteEval],
+) -> Option<Canvas> {
+    let mut pts: Vec<P2> = roofs
+        .iter()
+        .flat_map(|r| r.outline.shell.iter().copied())
+        .collect();
     pts.extend(sites.iter().flat_map(|s| s.polygon.shell.iter().copied()));
     let (lo, hi) = bounds_of(&pts)?;
     let (w_m, h_m) = ((hi[0] - lo[0]).max(1.0), (hi[1] - lo[1]).max(1.0));
     let ppm = (900.0 / w_m).min(900.0 / h_m).min(25.0);
     let (w, h) = ((w_m * ppm).ceil() as usize, (h_m * ppm).ceil() as usize);
-    let grid = Grid { x0: lo[0], y0: lo[1], cell_m: 1.0 / ppm, nx: w, ny: h };
-    let mut c = Canvas::new((w as i64 + 2 * MARGIN) as u32, (h as i64 + 2 * MARGIN + LEGEND) as u32);
+    let grid = Grid {
+        x0: lo[0],
+        y0: lo[1],
+        cell_m: 1.0 / ppm,
+        nx: w,
+        ny: h,
+    };
+    let mut c = Canvas::new(
+        (w as i64 + 2 * MARGIN) as u32,
+        (h as i64 + 2 * MARGIN + LEGEND) as u32,
+    );
     let layers: Vec<(Mask, Rgb<u8>)> = {
         let mut roof = Mask::empty(grid);
         let mut landable = Mask::empty(grid);
@@ -35,7 +52,11 @@ pub fn draw_overlay(title: &str, roofs: &[RoofTruth], sites: &[Site], evals: &[S
                 obstacles.add_polygon(&o.footprint);
             }
         }
-        vec![(roof, Rgb([205, 205, 205])), (landable, Rgb([170, 225, 160])), (obstacles, Rgb([225, 80, 70]))]
+        vec![
+            (roof, Rgb([205, 205, 205])),
+            (landable, Rgb([170, 225, 160])),
+            (obstacles, Rgb([225, 80, 70])),
+        ]
     };
     for (mask, col) in &layers {
         for j in 0..h {
@@ -46,7 +67,12 @@ pub fn draw_overlay(title: &str, roofs: &[RoofTruth], sites: &[Site], evals: &[S
             }
         }
     }
-    let to_px = |p: P2| (MARGIN + ((p[0] - lo[0]) * ppm).round() as i64, MARGIN + ((hi[1] - p[1]) * ppm).round() as i64);
+    let to_px = |p: P2| {
+        (
+            MARGIN + ((p[0] - lo[0]) * ppm).round() as i64,
+            MARGIN + ((hi[1] - p[1]) * ppm).round() as i64,
+        )
+    };
     let blue = Rgb([40, 90, 200]);
     for s in sites {
         for ring in s.polygon.rings() {
@@ -57,12 +83,25 @@ pub fn draw_overlay(title: &str, roofs: &[RoofTruth], sites: &[Site], evals: &[S
         }
     }
     for (s, e) in sites.iter().zip(evals) {
-        let col = if e.verdict.is_safe() { Rgb([20, 30, 110]) } else { Rgb([220, 0, 200]) };
+        let col = if !e.verdict.is_unsafe() {
+            Rgb([20, 30, 110])
+        } else {
+            Rgb([220, 0, 200])
+        };
         let n = 96;
         for k in 0..n {
-            let (t0, t1) = (k as f64 / n as f64 * std::f64::consts::TAU, (k + 1) as f64 / n as f64 * std::f64::consts::TAU);
-            let a = to_px([s.center[0] + s.radius_m * t0.cos(), s.center[1] + s.radius_m * t0.sin()]);
-            let b = to_px([s.center[0] + s.radius_m * t1.cos(), s.center[1] + s.radius_m * t1.sin()]);
+            let (t0, t1) = (
+                k as f64 / n as f64 * std::f64::consts::TAU,
+                (k + 1) as f64 / n as f64 * std::f64::consts::TAU,
+            );
+            let a = to_px([
+                s.center[0] + s.radius_m * t0.cos(),
+                s.center[1] + s.radius_m * t0.sin(),
+            ]);
+            let b = to_px([
+                s.center[0] + s.radius_m * t1.cos(),
+                s.center[1] + s.radius_m * t1.sin(),
+            ]);
             c.line(a.0, a.1, b.0, b.1, col);
             c.line(a.0 + 1, a.1, b.0 + 1, b.1, col);
         }
@@ -89,14 +128,28 @@ mod tests {
             outline: Polygon2::rect([0.0, 0.0], [20.0, 10.0]),
             interior: Polygon2::rect([0.3, 0.3], [19.7, 9.7]),
             height_m: 30.0,
-            obstacles: vec![Obstacle { class: 13, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
+            obstacles: vec![Obstacle {
+                class: 13,
+                footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]),
+                seen: true,
+            }],
             scanned: None,
             stated_best_radius_m: None,
             scored: true,
             target: true,
         };
-        let site = Site { rank: 1, polygon: roof.interior.clone(), center: [5.0, 5.0], plane_height_m: 30.0, radius_m: 3.0 };
-        let e = judge_site(&site, std::slice::from_ref(&roof), &MetricsParams::default());
+        let site = Site {
+            rank: 1,
+            polygon: roof.interior.clone(),
+            center: [5.0, 5.0],
+            plane_height_m: 30.0,
+            radius_m: 3.0,
+        };
+        let e = judge_site(
+            &site,
+            std::slice::from_ref(&roof),
+            &MetricsParams::default(),
+        );
         let c = draw_overlay("T", &[roof], &[site], &[e]).unwrap();
         let count = |rgb: [u8; 3]| c.image().pixels().filter(|p| p.0 == rgb).count();
         assert!(count([170, 225, 160]) > 1000, "landable drawn");

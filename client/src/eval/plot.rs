@@ -24,7 +24,9 @@ pub struct Canvas {
 impl Canvas {
     /// A white canvas.
     pub fn new(width: u32, height: u32) -> Self {
-        Self { img: RgbImage::from_pixel(width, height, WHITE) }
+        Self {
+            img: RgbImage::from_pixel(width, height, WHITE),
+        }
     }
 
     fn put(&mut self, x: i64, y: i64, c: Rgb<u8>) {
@@ -86,8 +88,15 @@ impl Canvas {
             for (r, bits) in rows.iter().enumerate() {
                 for col in 0..5 {
                     if bits & (0x10 >> col) != 0 {
-                        let (px, py) = (cx + col * i64::from(SCALE), y + r as i64 * i64::from(SCALE));
-                        self.rect(px, py, px + i64::from(SCALE) - 1, py + i64::from(SCALE) - 1, c);
+                        let (px, py) =
+                            (cx + col * i64::from(SCALE), y + r as i64 * i64::from(SCALE));
+                        self.rect(
+                            px,
+                            py,
+                            px + i64::from(SCALE) - 1,
+                            py + i64::from(SCALE) - 1,
+                            c,
+                        );
                     }
                 }
             }
@@ -105,7 +114,10 @@ impl Canvas {
     pub fn save(&self, path: &Path) -> Result<(), ClientError> {
         self.img
             .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| ClientError::Image { what: path.display().to_string(), reason: e.to_string() })
+            .map_err(|e| ClientError::Image {
+                what: path.display().to_string(),
+                reason: e.to_string(),
+            })
     }
 
     /// The pixels.
@@ -130,7 +142,9 @@ const BOTTOM: i64 = 90;
 /// Grouped bars on a log axis with 95 % whiskers, like the paper's Fig. 5. Values are in
 /// milliseconds; series names go in the legend.
 pub fn bars_log(title: &str, unit: &str, series: &[&str], groups: &[BarGroup]) -> Canvas {
-    let width = (LEFT + RIGHT + groups.len().max(1) as i64 * (series.len().max(1) as i64 * 22 + 30)).max(700);
+    let width =
+        (LEFT + RIGHT + groups.len().max(1) as i64 * (series.len().max(1) as i64 * 22 + 30))
+            .max(700);
     let height = 480i64;
     let mut c = Canvas::new(width as u32, height as u32);
     let positives: Vec<f64> = groups
@@ -139,11 +153,21 @@ pub fn bars_log(title: &str, unit: &str, series: &[&str], groups: &[BarGroup]) -
         .flat_map(|m| [m.mean, m.hi])
         .filter(|v| *v > 0.0 && v.is_finite())
         .collect();
-    let lo_exp = positives.iter().map(|v| v.log10().floor() as i32).min().unwrap_or(-2);
-    let hi_exp = positives.iter().map(|v| v.log10().ceil() as i32).max().unwrap_or(3).max(lo_exp + 1);
+    let lo_exp = positives
+        .iter()
+        .map(|v| v.log10().floor() as i32)
+        .min()
+        .unwrap_or(-2);
+    let hi_exp = positives
+        .iter()
+        .map(|v| v.log10().ceil() as i32)
+        .max()
+        .unwrap_or(3)
+        .max(lo_exp + 1);
     let (x0, x1, y0, y1) = (LEFT, width - RIGHT, TOP, height - BOTTOM);
     let y_of = |v: f64| {
-        let t = (v.max(10f64.powi(lo_exp)).log10() - f64::from(lo_exp)) / f64::from(hi_exp - lo_exp);
+        let t =
+            (v.max(10f64.powi(lo_exp)).log10() - f64::from(lo_exp)) / f64::from(hi_exp - lo_exp);
         y1 - (t.clamp(0.0, 1.0) * (y1 - y0) as f64).round() as i64
     };
     for e in lo_exp..=hi_exp {
@@ -177,7 +201,11 @@ pub fn bars_log(title: &str, unit: &str, series: &[&str], groups: &[BarGroup]) -
             c.rect(mid - 3, wlo, mid + 3, wlo, BLACK);
         }
         // Labels alternate between two rows so that long step names do not collide.
-        let label: String = g.label.chars().take(((group_w / 12.0) as usize).max(3) * 2).collect();
+        let label: String = g
+            .label
+            .chars()
+            .take(((group_w / 12.0) as usize).max(3) * 2)
+            .collect();
         let lx = (gx + group_w * 0.4) as i64 - Canvas::text_width(&label) / 2;
         c.text(lx, y1 + 8 + (gi as i64 % 2) * 18, &label, BLACK);
     }
@@ -188,8 +216,15 @@ pub fn bars_log(title: &str, unit: &str, series: &[&str], groups: &[BarGroup]) -
 /// Box plots, one per series: box from the 25th to the 75th percentile, median line, whiskers
 /// from the 5th to the 95th percentile, and a black dot at the mean. The y axis is linear over
 /// `y_range`.
-pub fn box_plot(title: &str, series: &[(&str, Vec<f64>)], y_range: (f64, f64), reference: Option<f64>) -> Canvas {
-    let width = (LEFT + RIGHT + series.len().max(1) as i64 * 170).max(600);
+pub fn box_plot(
+    title: &str,
+    series: &[(&str, Vec<f64>)],
+    y_range: (f64, f64),
+    reference: Option<f64>,
+) -> Canvas {
+    let width = (LEFT + RIGHT + series.len().max(1) as i64 * 250)
+        .max(600)
+        .max(LEFT + 40 + Canvas::text_width(title));
     let height = 440i64;
     let mut c = Canvas::new(width as u32, height as u32);
     let (x0, x1, y0, y1) = (LEFT, width - RIGHT, TOP, height - BOTTOM + 30);
@@ -221,9 +256,13 @@ pub fn box_plot(title: &str, series: &[(&str, Vec<f64>)], y_range: (f64, f64), r
         let cx = (x0 as f64 + slot * (si as f64 + 0.5)) as i64;
         let label = format!("{name} (N={})", xs.iter().filter(|x| x.is_finite()).count());
         c.text(cx - Canvas::text_width(&label) / 2, y1 + 10, &label, BLACK);
-        let (Some(p5), Some(p25), Some(p50), Some(p75), Some(p95)) =
-            (quantile(xs, 0.05), quantile(xs, 0.25), quantile(xs, 0.5), quantile(xs, 0.75), quantile(xs, 0.95))
-        else {
+        let (Some(p5), Some(p25), Some(p50), Some(p75), Some(p95)) = (
+            quantile(xs, 0.05),
+            quantile(xs, 0.25),
+            quantile(xs, 0.5),
+            quantile(xs, 0.75),
+            quantile(xs, 0.95),
+        ) else {
             continue;
         };
         let col = Rgb(PALETTE[si % PALETTE.len()]);
@@ -252,7 +291,11 @@ fn legend(c: &mut Canvas, series: &[&str], x: i64, y: i64) {
 }
 
 fn tick_label(e: i32) -> String {
-    if e >= 0 { format!("{}", 10u64.pow(e as u32)) } else { format!("{}", 10f64.powi(e)) }
+    if e >= 0 {
+        format!("{}", 10u64.pow(e as u32))
+    } else {
+        format!("{}", 10f64.powi(e))
+    }
 }
 
 /// The 5×7 glyph of `ch` (rows top to bottom, bit 4 is the leftmost column). Lower case draws as
@@ -320,7 +363,10 @@ mod tests {
     use super::*;
 
     fn dark_pixels(c: &Canvas) -> usize {
-        c.image().pixels().filter(|p| p.0.iter().all(|&v| v < 60)).count()
+        c.image()
+            .pixels()
+            .filter(|p| p.0.iter().all(|&v| v < 60))
+            .count()
     }
 
     #[test]
@@ -334,17 +380,37 @@ mod tests {
 
     #[test]
     fn taller_bars_for_larger_means_on_the_log_axis() {
-        let m = |v: f64| Some(MeanCi { n: 10, mean: v, lo: v * 0.9, hi: v * 1.1 });
+        let m = |v: f64| {
+            Some(MeanCi {
+                n: 10,
+                mean: v,
+                lo: v * 0.9,
+                hi: v * 1.1,
+            })
+        };
         let groups = vec![
-            BarGroup { label: "a".into(), values: vec![m(0.1), m(10.0)] },
-            BarGroup { label: "b".into(), values: vec![m(100.0), None] },
+            BarGroup {
+                label: "a".into(),
+                values: vec![m(0.1), m(10.0)],
+            },
+            BarGroup {
+                label: "b".into(),
+                values: vec![m(100.0), None],
+            },
         ];
         let c = bars_log("T", "ms", &["x", "y"], &groups);
         let col = |rgb: [u8; 3]| c.image().pixels().filter(|p| p.0 == rgb).count();
         // Series 0 has one tiny and one tall bar; series 1 one medium bar: both present.
         assert!(col(PALETTE[0]) > 0 && col(PALETTE[1]) > 0);
-        let pixels_in_column = |x: u32| (0..c.image().height()).filter(|&y| c.image().get_pixel(x, y).0 == PALETTE[0]).count();
-        let heights: Vec<usize> = (0..c.image().width()).map(pixels_in_column).filter(|&n| n > 0).collect();
+        let pixels_in_column = |x: u32| {
+            (0..c.image().height())
+                .filter(|&y| c.image().get_pixel(x, y).0 == PALETTE[0])
+                .count()
+        };
+        let heights: Vec<usize> = (0..c.image().width())
+            .map(pixels_in_column)
+            .filter(|&n| n > 0)
+            .collect();
         assert!(heights.iter().max() > heights.iter().min(), "{heights:?}");
     }
 
@@ -352,7 +418,12 @@ mod tests {
     fn box_plot_draws_each_series() {
         let a: Vec<f64> = (0..50).map(|i| 0.8 + f64::from(i) * 0.004).collect();
         let b: Vec<f64> = (0..50).map(|i| 0.3 + f64::from(i) * 0.01).collect();
-        let c = box_plot("IoU", &[("geometry", b), ("model", a)], (0.0, 1.0), Some(0.93));
+        let c = box_plot(
+            "IoU",
+            &[("geometry", b), ("model", a)],
+            (0.0, 1.0),
+            Some(0.93),
+        );
         for rgb in &PALETTE[..2] {
             assert!(c.image().pixels().any(|p| p.0 == *rgb));
         }

@@ -126,6 +126,8 @@ pub struct ModeSummary {
     pub unsafe_unseen: usize,
     pub unsafe_outside_roof: usize,
     pub off_roof: usize,
+    /// Sites on buildings the ground truth does not list: not judged, not unsafe.
+    pub unlisted_roof: usize,
     /// Target roofs (the one each flight approaches) scored for IoU and radius ratio; the
     /// headline numbers below are over these.
     pub roofs: usize,
@@ -165,8 +167,22 @@ pub struct Targets {
 
 impl Default for Targets {
     fn default() -> Self {
-        Self { min_mean_iou: 0.93, min_median_ratio: 0.9 }
+        Self {
+            min_mean_iou: 0.93,
+            min_median_ratio: 0.9,
+        }
     }
+}
+
+/// One unsafe site, for explaining it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UnsafeSite {
+    pub mode: Mode,
+    pub frame: String,
+    pub rank: u32,
+    pub radius_m: f64,
+    pub height_above_roof_m: Option<f64>,
+    pub verdict: Verdict,
 }
 
 /// Everything an evaluation produced.
@@ -174,8 +190,8 @@ impl Default for Targets {
 pub struct Summary {
     pub scenarios: usize,
     pub modes: Vec<ModeSummary>,
-    /// Unsafe sites listed one by one (mode, frame, rank, verdict), for explaining each.
-    pub unsafe_list: Vec<(Mode, String, u32, Verdict)>,
+    /// Unsafe sites listed one by one, for explaining each.
+    pub unsafe_list: Vec<UnsafeSite>,
     pub failures: Vec<FrameFailure>,
 }
 
@@ -202,7 +218,11 @@ pub fn class_name(class: u8) -> &'static str {
 
 /// Aggregates records into a summary.
 pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mode]) -> Summary {
-    let mut scenarios: Vec<&str> = records.iter().map(|r| r.frame.as_str()).chain(failures.iter().map(|f| f.frame.as_str())).collect();
+    let mut scenarios: Vec<&str> = records
+        .iter()
+        .map(|r| r.frame.as_str())
+        .chain(failures.iter().map(|f| f.frame.as_str()))
+        .collect();
     scenarios.sort_unstable();
     scenarios.dedup();
     let mut unsafe_list = Vec::new();
@@ -218,6 +238,7 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
             unsafe_unseen: 0,
             unsafe_outside_roof: 0,
             off_roof: 0,
+            unlisted_roof: 0,
             roofs: 0,
             roofs_without_site: 0,
             roofs_all: 0,
@@ -249,8 +270,19 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
                     }
                     Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
                     Verdict::OffRoof => s.off_roof += 1,
+                    Verdict::UnlistedRoof => {
+                        s.unlisted_roof += 1;
+                        continue;
+                    }
                 }
-                unsafe_list.push((mode, r.frame.clone(), site.rank, site.verdict));
+                unsafe_list.push(UnsafeSite {
+                    mode,
+                    frame: r.frame.clone(),
+                    rank: site.rank,
+                    radius_m: site.radius_m,
+                    height_above_roof_m: site.height_above_roof_m,
+                    verdict: site.verdict,
+                });
             }
             for roof in &r.eval.roofs {
                 s.roofs_all += 1;
@@ -279,7 +311,9 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
         s.iou_median = median(&ious);
         s.ratio = mean_ci95(&ratios);
         s.ratio_median = median(&ratios);
-        s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| median(x).unwrap_or(f64::NAN));
+        s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| {
+            median(x).unwrap_or(f64::NAN)
+        });
         s.classes = classes
             .into_iter()
             .map(|(class, (n, hit, cov))| ClassSummary {
@@ -290,31 +324,70 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
                 mean_covered: cov / n.max(1) as f64,
             })
             .collect();
-        let mut tag_names: Vec<&str> = recs.iter().flat_map(|r| r.tags.iter().map(String::as_str)).collect();
+        let mut tag_names: Vec<&str> = recs
+            .iter()
+            .flat_map(|r| r.tags.iter().map(String::as_str))
+            .collect();
         tag_names.sort_unstable();
         tag_names.dedup();
         s.tags = tag_names
             .into_iter()
             .map(|tag| {
-                let tagged: Vec<&&FrameRecord> = recs.iter().filter(|r| r.tags.iter().any(|t| t == tag)).collect();
-                let ious: Vec<f64> = tagged.iter().flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou)).collect();
-                let ratios: Vec<f64> = tagged.iter().flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.radius_ratio)).collect();
+                let tagged: Vec<&&FrameRecord> = recs
+                    .iter()
+                    .filter(|r| r.tags.iter().any(|t| t == tag))
+                    .collect();
+                let ious: Vec<f64> = tagged
+                    .iter()
+                    .flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou))
+                    .collect();
+                let ratios: Vec<f64> = tagged
+                    .iter()
+                    .flat_map(|r| {
+                        r.eval
+                            .roofs
+                            .iter()
+                            .filter(|x| x.target)
+                            .map(|x| x.radius_ratio)
+                    })
+                    .collect();
                 TagSummary {
                     tag: tag.to_string(),
                     frames: tagged.len(),
-                    unsafe_sites: tagged.iter().map(|r| r.eval.sites.iter().filter(|x| !x.verdict.is_safe()).count()).sum(),
+                    unsafe_sites: tagged
+                        .iter()
+                        .map(|r| {
+                            r.eval
+                                .sites
+                                .iter()
+                                .filter(|x| x.verdict.is_unsafe())
+                                .count()
+                        })
+                        .sum(),
                     mean_iou: mean_ci95(&ious).map(|m| m.mean),
                     median_ratio: median(&ratios),
                 }
             })
             .collect();
         s.steps = (0..STEPS.len())
-            .map(|k| mean_ci95(&recs.iter().filter_map(|r| r.step_ms.get(k).copied().flatten()).collect::<Vec<_>>()))
+            .map(|k| {
+                mean_ci95(
+                    &recs
+                        .iter()
+                        .filter_map(|r| r.step_ms.get(k).copied().flatten())
+                        .collect::<Vec<_>>(),
+                )
+            })
             .collect();
         s.round_trip = mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>());
         out.push(s);
     }
-    Summary { scenarios: scenarios.len(), modes: out, unsafe_list, failures: failures.to_vec() }
+    Summary {
+        scenarios: scenarios.len(),
+        modes: out,
+        unsafe_list,
+        failures: failures.to_vec(),
+    }
 }
 
 fn opt(v: Option<f64>, digits: usize) -> String {
@@ -322,42 +395,72 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 }
 
 fn ci(v: Option<MeanCi>, digits: usize) -> String {
-    v.map_or_else(|| "-".into(), |m| format!("{:.digits$} [{:.digits$}, {:.digits$}]", m.mean, m.lo, m.hi))
+    v.map_or_else(
+        || "-".into(),
+        |m| format!("{:.digits$} [{:.digits$}, {:.digits$}]", m.mean, m.lo, m.hi),
+    )
 }
 
 impl Summary {
     /// The rows of the main table: a label and one cell per mode.
     fn main_rows(&self) -> Vec<(String, Vec<String>)> {
         let row = |label: &str, f: &dyn Fn(&ModeSummary) -> String| {
-            (label.to_string(), self.modes.iter().map(f).collect::<Vec<_>>())
+            (
+                label.to_string(),
+                self.modes.iter().map(f).collect::<Vec<_>>(),
+            )
         };
         vec![
-            row("frames answered / failed", &|m| format!("{} / {}", m.frames, m.failures)),
+            row("frames answered / failed", &|m| {
+                format!("{} / {}", m.frames, m.failures)
+            }),
             row("sites returned", &|m| m.sites.to_string()),
             row("unsafe sites (all)", &|m| m.unsafe_sites().to_string()),
             row("  into an obstacle", &|m| m.unsafe_obstacle.to_string()),
-            row("    of which unseen by the LiDAR", &|m| m.unsafe_unseen.to_string()),
-            row("  past the roof edge", &|m| m.unsafe_outside_roof.to_string()),
-            row("  off every roof", &|m| m.off_roof.to_string()),
+            row("    of which unseen by the LiDAR", &|m| {
+                m.unsafe_unseen.to_string()
+            }),
+            row("  past the roof edge", &|m| {
+                m.unsafe_outside_roof.to_string()
+            }),
+            row("  on the ground, off every roof", &|m| {
+                m.off_roof.to_string()
+            }),
+            row("sites on unlisted roofs (not judged)", &|m| {
+                m.unlisted_roof.to_string()
+            }),
             row("target roofs scored", &|m| m.roofs.to_string()),
-            row("target roofs without a safe site", &|m| m.roofs_without_site.to_string()),
+            row("target roofs without a safe site", &|m| {
+                m.roofs_without_site.to_string()
+            }),
             row("target polygon IoU, mean [95% CI]", &|m| ci(m.iou, 3)),
             row("target polygon IoU, median", &|m| opt(m.iou_median, 3)),
-            row("target radius ratio, median [95% CI]", &|m| match (m.ratio_median, m.ratio_median_ci) {
+            row("target radius ratio, median [95% CI]", &|m| match (
+                m.ratio_median,
+                m.ratio_median_ci,
+            ) {
                 (Some(v), Some((lo, hi))) => format!("{v:.3} [{lo:.3}, {hi:.3}]"),
                 (v, _) => opt(v, 3),
             }),
             row("target radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
             row("all roofs in view scored", &|m| m.roofs_all.to_string()),
-            row("all roofs: polygon IoU, mean [95% CI]", &|m| ci(m.iou_all, 3)),
-            row("all roofs: radius ratio, median", &|m| opt(m.ratio_median_all, 3)),
+            row("all roofs: polygon IoU, mean [95% CI]", &|m| {
+                ci(m.iou_all, 3)
+            }),
+            row("all roofs: radius ratio, median", &|m| {
+                opt(m.ratio_median_all, 3)
+            }),
             row("client round trip, ms", &|m| ci(m.round_trip, 1)),
         ]
     }
 
     /// Per-class rows: class name, then "hit / n (covered %)" per mode.
     fn class_rows(&self) -> Vec<(String, Vec<String>)> {
-        let mut classes: Vec<u8> = self.modes.iter().flat_map(|m| m.classes.iter().map(|c| c.class)).collect();
+        let mut classes: Vec<u8> = self
+            .modes
+            .iter()
+            .flat_map(|m| m.classes.iter().map(|c| c.class))
+            .collect();
         classes.sort_unstable();
         classes.dedup();
         classes
@@ -367,7 +470,12 @@ impl Summary {
                     .modes
                     .iter()
                     .map(|m| match m.classes.iter().find(|c| c.class == class) {
-                        Some(c) => format!("{} / {} hit, {:.0}% covered", c.hit, c.obstacles, 100.0 * c.mean_covered),
+                        Some(c) => format!(
+                            "{} / {} hit, {:.0}% covered",
+                            c.hit,
+                            c.obstacles,
+                            100.0 * c.mean_covered
+                        ),
                         None => "-".into(),
                     })
                     .collect();
@@ -378,7 +486,11 @@ impl Summary {
 
     /// Per-tag rows: "frames, unsafe, IoU, ratio" per mode.
     fn tag_rows(&self) -> Vec<(String, Vec<String>)> {
-        let mut tags: Vec<&str> = self.modes.iter().flat_map(|m| m.tags.iter().map(|t| t.tag.as_str())).collect();
+        let mut tags: Vec<&str> = self
+            .modes
+            .iter()
+            .flat_map(|m| m.tags.iter().map(|t| t.tag.as_str()))
+            .collect();
         tags.sort_unstable();
         tags.dedup();
         tags.into_iter()
@@ -407,37 +519,78 @@ impl Summary {
             .iter()
             .enumerate()
             .map(|(k, step)| {
-                (step.to_string(), self.modes.iter().map(|m| ci(m.steps.get(k).copied().flatten(), 2)).collect())
+                (
+                    step.to_string(),
+                    self.modes
+                        .iter()
+                        .map(|m| ci(m.steps.get(k).copied().flatten(), 2))
+                        .collect(),
+                )
             })
             .collect()
     }
 
     /// The verdict on the targets for `mode`: one line per target.
     pub fn target_lines(&self, mode: Mode, targets: &Targets) -> Vec<(String, bool)> {
-        let Some(m) = self.modes.iter().find(|m| m.mode == mode) else { return Vec::new() };
+        let Some(m) = self.modes.iter().find(|m| m.mode == mode) else {
+            return Vec::new();
+        };
         let iou = m.iou.map(|c| c.mean);
         vec![
-            (format!("{}: unsafe sites = {} (target 0)", mode.name(), m.unsafe_sites()), m.unsafe_sites() == 0 && m.frames > 0),
             (
-                format!("{}: mean polygon IoU (target roofs) = {} (target >= {})", mode.name(), opt(iou, 3), targets.min_mean_iou),
+                format!(
+                    "{}: unsafe sites = {} (target 0)",
+                    mode.name(),
+                    m.unsafe_sites()
+                ),
+                m.unsafe_sites() == 0 && m.frames > 0,
+            ),
+            (
+                format!(
+                    "{}: mean polygon IoU (target roofs) = {} (target >= {})",
+                    mode.name(),
+                    opt(iou, 3),
+                    targets.min_mean_iou
+                ),
                 iou.is_some_and(|v| v >= targets.min_mean_iou),
             ),
             (
-                format!("{}: median radius ratio (target roofs) = {} (target >= {})", mode.name(), opt(m.ratio_median, 3), targets.min_median_ratio),
-                m.ratio_median.is_some_and(|v| v >= targets.min_median_ratio),
+                format!(
+                    "{}: median radius ratio (target roofs) = {} (target >= {})",
+                    mode.name(),
+                    opt(m.ratio_median, 3),
+                    targets.min_median_ratio
+                ),
+                m.ratio_median
+                    .is_some_and(|v| v >= targets.min_median_ratio),
             ),
         ]
     }
 
     /// The report as aligned plain-text tables.
     pub fn to_text(&self) -> String {
-        let header: Vec<String> = self.modes.iter().map(|m| m.mode.name().to_string()).collect();
+        let header: Vec<String> = self
+            .modes
+            .iter()
+            .map(|m| m.mode.name().to_string())
+            .collect();
         let mut s = String::new();
-        let _ = writeln!(s, "landing eval: {} frames, modes {}", self.scenarios, header.join(", "));
+        let _ = writeln!(
+            s,
+            "landing eval: {} frames, modes {}",
+            self.scenarios,
+            header.join(", ")
+        );
         for (title, rows) in [
             ("quality", self.main_rows()),
-            ("obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)", self.class_rows()),
-            ("hard cases (frames, unsafe sites, mean IoU, median radius ratio)", self.tag_rows()),
+            (
+                "obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)",
+                self.class_rows(),
+            ),
+            (
+                "hard cases (frames, unsafe sites, mean IoU, median radius ratio)",
+                self.tag_rows(),
+            ),
             ("server time per step, ms: mean [95% CI]", self.step_rows()),
         ] {
             let _ = writeln!(s, "\n{title}");
@@ -448,9 +601,18 @@ impl Summary {
 
     /// The report as Markdown (tables, targets, the list of unsafe sites, and the charts).
     pub fn to_markdown(&self, targets: &Targets, gate: &[Mode], charts: &[(&str, &str)]) -> String {
-        let header: Vec<String> = self.modes.iter().map(|m| format!("`{}`", m.mode.name())).collect();
+        let header: Vec<String> = self
+            .modes
+            .iter()
+            .map(|m| format!("`{}`", m.mode.name()))
+            .collect();
         let mut s = String::new();
-        let _ = writeln!(s, "{} frames evaluated in {} mode(s).\n", self.scenarios, self.modes.len());
+        let _ = writeln!(
+            s,
+            "{} frames evaluated in {} mode(s).\n",
+            self.scenarios,
+            self.modes.len()
+        );
         for &mode in gate {
             for (line, ok) in self.target_lines(mode, targets) {
                 let _ = writeln!(s, "- {} {line}", if ok { "PASS" } else { "FAIL" });
@@ -458,26 +620,60 @@ impl Summary {
         }
         for (title, rows) in [
             ("Quality", self.main_rows()),
-            ("Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)", self.class_rows()),
-            ("Hard cases (frames, unsafe sites, mean IoU, median radius ratio)", self.tag_rows()),
+            (
+                "Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)",
+                self.class_rows(),
+            ),
+            (
+                "Hard cases (frames, unsafe sites, mean IoU, median radius ratio)",
+                self.tag_rows(),
+            ),
             ("Server time per step, ms: mean [95 % CI]", self.step_rows()),
         ] {
             let _ = writeln!(s, "\n#### {title}\n");
             md_table(&mut s, &header, &rows);
         }
         if !self.unsafe_list.is_empty() {
-            let _ = writeln!(s, "\n#### Unsafe sites\n\n| mode | frame | rank | verdict |\n|---|---|---|---|");
-            for (mode, frame, rank, v) in self.unsafe_list.iter().take(200) {
-                let _ = writeln!(s, "| {} | {frame} | {rank} | {} |", mode.name(), verdict_text(v));
+            let _ = writeln!(
+                s,
+                "\n#### Unsafe sites\n\n| mode | frame | rank | radius, m | plane above roof, m | verdict |\n|---|---|---|---|---|---|"
+            );
+            // At most 60 per mode, so that a noisy mode does not hide the others.
+            let mut left_out = 0;
+            for mode in self.modes.iter().map(|m| m.mode) {
+                let of_mode: Vec<&UnsafeSite> =
+                    self.unsafe_list.iter().filter(|u| u.mode == mode).collect();
+                left_out += of_mode.len().saturating_sub(60);
+                for u in of_mode.into_iter().take(60) {
+                    let _ = writeln!(
+                        s,
+                        "| {} | {} | {} | {:.2} | {} | {} |",
+                        u.mode.name(),
+                        u.frame,
+                        u.rank,
+                        u.radius_m,
+                        opt(u.height_above_roof_m, 2),
+                        verdict_text(&u.verdict)
+                    );
+                }
             }
-            if self.unsafe_list.len() > 200 {
-                let _ = writeln!(s, "\n({} more in results.json)", self.unsafe_list.len() - 200);
+            if left_out > 0 {
+                let _ = writeln!(s, "\n({left_out} more in results.json)");
             }
         }
         if !self.failures.is_empty() {
-            let _ = writeln!(s, "\n#### Frames without a result\n\n| mode | frame | error |\n|---|---|---|");
+            let _ = writeln!(
+                s,
+                "\n#### Frames without a result\n\n| mode | frame | error |\n|---|---|---|"
+            );
             for f in self.failures.iter().take(50) {
-                let _ = writeln!(s, "| {} | {} | {} |", f.mode.name(), f.frame, f.error.replace('|', "/"));
+                let _ = writeln!(
+                    s,
+                    "| {} | {} | {} |",
+                    f.mode.name(),
+                    f.frame,
+                    f.error.replace('|', "/")
+                );
             }
         }
         for (title, file) in charts {
@@ -487,19 +683,34 @@ impl Summary {
     }
 
     /// Draws the charts into `dir`; returns (title, file name) of each.
-    pub fn write_charts(&self, dir: &Path, records: &[FrameRecord]) -> Result<Vec<(&'static str, String)>, ClientError> {
+    pub fn write_charts(
+        &self,
+        dir: &Path,
+        records: &[FrameRecord],
+    ) -> Result<Vec<(&'static str, String)>, ClientError> {
         let names: Vec<&str> = self.modes.iter().map(|m| m.mode.name()).collect();
         let groups: Vec<BarGroup> = STEPS
             .iter()
             .enumerate()
-            .filter(|(k, _)| self.modes.iter().any(|m| m.steps.get(*k).copied().flatten().is_some()))
+            .filter(|(k, _)| {
+                self.modes
+                    .iter()
+                    .any(|m| m.steps.get(*k).copied().flatten().is_some())
+            })
             .map(|(k, step)| BarGroup {
                 label: step.replace('_', " "),
-                values: self.modes.iter().map(|m| m.steps.get(k).copied().flatten()).collect(),
+                values: self
+                    .modes
+                    .iter()
+                    .map(|m| m.steps.get(k).copied().flatten())
+                    .collect(),
             })
             .collect();
         let mut written = Vec::new();
-        let mut save = |title: &'static str, file: &str, canvas: super::plot::Canvas| -> Result<(), ClientError> {
+        let mut save = |title: &'static str,
+                        file: &str,
+                        canvas: super::plot::Canvas|
+         -> Result<(), ClientError> {
             canvas.save(&dir.join(file))?;
             written.push((title, file.to_string()));
             Ok(())
@@ -507,26 +718,68 @@ impl Summary {
         save(
             "Per-step time with 95 % CI (log scale)",
             "timing.png",
-            bars_log("SERVER TIME PER STEP, MEAN AND 95% CI", "MS (LOG)", &names, &groups),
+            bars_log(
+                "SERVER TIME PER STEP, MEAN AND 95% CI",
+                "MS (LOG)",
+                &names,
+                &groups,
+            ),
         )?;
         let per_mode = |f: &dyn Fn(&FrameRecord) -> Vec<f64>| -> Vec<(&str, Vec<f64>)> {
             self.modes
                 .iter()
-                .map(|m| (m.mode.name(), records.iter().filter(|r| r.mode == m.mode).flat_map(f).collect()))
+                .map(|m| {
+                    (
+                        m.mode.name(),
+                        records
+                            .iter()
+                            .filter(|r| r.mode == m.mode)
+                            .flat_map(f)
+                            .collect(),
+                    )
+                })
                 .collect()
         };
-        let ratios = per_mode(&|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.radius_ratio).collect());
-        let hi = ratios.iter().flat_map(|(_, v)| v.iter().copied()).fold(1.2f64, f64::max).min(3.0);
+        let ratios = per_mode(&|r| {
+            r.eval
+                .roofs
+                .iter()
+                .filter(|x| x.target)
+                .map(|x| x.radius_ratio)
+                .collect()
+        });
+        let hi = ratios
+            .iter()
+            .flat_map(|(_, v)| v.iter().copied())
+            .fold(1.2f64, f64::max)
+            .min(3.0);
         save(
             "Radius ratio (returned / true best) on the target roof, per mode",
             "radius_ratio.png",
-            box_plot("TARGET ROOF: RADIUS RATIO, RETURNED / TRUE BEST", &ratios, (0.0, hi), Some(0.9)),
+            box_plot(
+                "TARGET ROOF: RADIUS RATIO, RETURNED / TRUE BEST",
+                &ratios,
+                (0.0, hi),
+                Some(0.9),
+            ),
         )?;
-        let ious = per_mode(&|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou).collect());
+        let ious = per_mode(&|r| {
+            r.eval
+                .roofs
+                .iter()
+                .filter(|x| x.target)
+                .map(|x| x.iou)
+                .collect()
+        });
         save(
             "Polygon IoU with the true landable area on the target roof, per mode",
             "iou.png",
-            box_plot("TARGET ROOF: POLYGON IOU WITH TRUE LANDABLE AREA", &ious, (0.0, 1.0), Some(0.93)),
+            box_plot(
+                "TARGET ROOF: POLYGON IOU WITH TRUE LANDABLE AREA",
+                &ious,
+                (0.0, 1.0),
+                Some(0.93),
+            ),
         )?;
         Ok(written)
     }
@@ -535,20 +788,31 @@ impl Summary {
 fn verdict_text(v: &Verdict) -> String {
     match v {
         Verdict::Safe => "safe".into(),
-        Verdict::Obstacle { class, intrusion_m, seen } => format!(
+        Verdict::Obstacle {
+            class,
+            intrusion_m,
+            seen,
+        } => format!(
             "{intrusion_m:.2} m into a {}{}",
             class_name(*class),
             if *seen { "" } else { " (no LiDAR point on it)" }
         ),
         Verdict::OutsideRoof { intrusion_m } => format!("{intrusion_m:.2} m past the roof edge"),
-        Verdict::OffRoof => "centre on no roof".into(),
+        Verdict::OffRoof => "centre on the ground, off every roof".into(),
+        Verdict::UnlistedRoof => "on a roof the ground truth does not list".into(),
     }
 }
 
 fn text_table(s: &mut String, header: &[String], rows: &[(String, Vec<String>)]) {
     let first = rows.iter().map(|r| r.0.chars().count()).max().unwrap_or(0);
     let widths: Vec<usize> = (0..header.len())
-        .map(|k| rows.iter().map(|r| r.1[k].chars().count()).chain([header[k].len()]).max().unwrap_or(0))
+        .map(|k| {
+            rows.iter()
+                .map(|r| r.1[k].chars().count())
+                .chain([header[k].len()])
+                .max()
+                .unwrap_or(0)
+        })
         .collect();
     let _ = write!(s, "  {:first$}", "");
     for (h, w) in header.iter().zip(&widths) {
@@ -581,15 +845,22 @@ pub fn write_report(
     targets: &Targets,
     gate: &[Mode],
 ) -> Result<String, ClientError> {
-    let io = |path: PathBuf| move |e: std::io::Error| ClientError::Io { path: path.display().to_string(), source: e };
+    let io = |path: PathBuf| {
+        move |e: std::io::Error| ClientError::Io {
+            path: path.display().to_string(),
+            source: e,
+        }
+    };
     std::fs::create_dir_all(dir).map_err(io(dir.to_path_buf()))?;
     let charts = summary.write_charts(dir, records)?;
     let chart_refs: Vec<(&str, &str)> = charts.iter().map(|(t, f)| (*t, f.as_str())).collect();
     let md = summary.to_markdown(targets, gate, &chart_refs);
     std::fs::write(dir.join("summary.md"), &md).map_err(io(dir.join("summary.md")))?;
     let json = serde_json::json!({ "summary": summary, "records": records });
-    let text = serde_json::to_string_pretty(&json)
-        .map_err(|e| ClientError::InvalidInput { field: "results", reason: e.to_string() })?;
+    let text = serde_json::to_string_pretty(&json).map_err(|e| ClientError::InvalidInput {
+        field: "results",
+        reason: e.to_string(),
+    })?;
     std::fs::write(dir.join("results.json"), text).map_err(io(dir.join("results.json")))?;
     Ok(md)
 }
@@ -607,7 +878,13 @@ mod tests {
             step_ms: vec![Some(1.0); STEPS.len()],
             round_trip_ms: 5.0,
             eval: FrameEval {
-                sites: vec![SiteEval { rank: 1, radius_m: 3.0, roof: Some(0), verdict }],
+                sites: vec![SiteEval {
+                    rank: 1,
+                    radius_m: 3.0,
+                    roof: Some(0),
+                    height_above_roof_m: Some(0.0),
+                    verdict,
+                }],
                 roofs: vec![RoofEval {
                     roof: 0,
                     roof_id: 1,
@@ -620,14 +897,24 @@ mod tests {
                     radius_ratio: ratio,
                     iou,
                 }],
-                obstacles: vec![ObstacleEval { roof: 0, class: 13, scanned_area_m2: 4.0, covered_fraction: 1.0 - iou, hit: !verdict.is_safe() }],
+                obstacles: vec![ObstacleEval {
+                    roof: 0,
+                    class: 13,
+                    scanned_area_m2: 4.0,
+                    covered_fraction: 1.0 - iou,
+                    hit: !verdict.is_safe(),
+                }],
             },
         }
     }
 
     #[test]
     fn summary_counts_and_targets() {
-        let tarp = Verdict::Obstacle { class: 13, intrusion_m: 1.0, seen: true };
+        let tarp = Verdict::Obstacle {
+            class: 13,
+            intrusion_m: 1.0,
+            seen: true,
+        };
         let records = vec![
             record(Mode::Geometry, "a#1", tarp, 0.8, 0.0),
             record(Mode::Geometry, "a#2", Verdict::Safe, 0.9, 0.8),
@@ -642,7 +929,11 @@ mod tests {
         assert!((s.modes[1].iou.unwrap().mean - 0.96).abs() < 1e-9);
         let lines = s.target_lines(Mode::Model, &Targets::default());
         assert!(lines.iter().all(|(_, ok)| *ok), "{lines:?}");
-        assert!(s.target_lines(Mode::Geometry, &Targets::default()).iter().any(|(_, ok)| !ok));
+        assert!(
+            s.target_lines(Mode::Geometry, &Targets::default())
+                .iter()
+                .any(|(_, ok)| !ok)
+        );
         assert_eq!(s.unsafe_list.len(), 1);
         let text = s.to_text();
         assert!(text.contains("tarp") && text.contains("geometry"), "{text}");

@@ -65,23 +65,34 @@ pub fn fill_scanned_regions(scenario: &mut Scenario, band_m: f64) -> Result<(), 
         .frame
         .point_cloud
         .as_ref()
-        .ok_or(ClientError::InvalidInput { field: "frame.point_cloud", reason: "missing".into() })?;
+        .ok_or(ClientError::InvalidInput {
+            field: "frame.point_cloud",
+            reason: "missing".into(),
+        })?;
     let world = crate::unpack_point_cloud(cloud)?.to_world(cloud.pose.as_ref());
     for roof in scenario.roofs.iter_mut().filter(|r| r.scanned.is_none()) {
         let hits: Vec<P2> = world
             .iter()
-            .filter(|p| (p[2] - roof.height_m).abs() <= band_m && roof.interior.contains([p[0], p[1]]))
+            .filter(|p| {
+                (p[2] - roof.height_m).abs() <= band_m && roof.interior.contains([p[0], p[1]])
+            })
             .map(|p| [p[0], p[1]])
             .collect();
         let hull = convex_hull(&hits);
-        roof.scanned = Some(if hull.len() >= 3 { Polygon2::simple(hull) } else { Polygon2::default() });
+        roof.scanned = Some(if hull.len() >= 3 {
+            Polygon2::simple(hull)
+        } else {
+            Polygon2::default()
+        });
     }
     Ok(())
 }
 
 /// The metrics' view of a returned site.
 pub fn site_of(s: &LandingSite) -> Site {
-    let ring = |r: &landing_proto::v1::LinearRing| r.points.iter().map(|p| [p.x, p.y]).collect::<Vec<P2>>();
+    let ring = |r: &landing_proto::v1::LinearRing| {
+        r.points.iter().map(|p| [p.x, p.y]).collect::<Vec<P2>>()
+    };
     let polygon = s
         .polygon
         .as_ref()
@@ -92,14 +103,23 @@ pub fn site_of(s: &LandingSite) -> Site {
         .unwrap_or_default();
     let center = s.center.as_ref().map_or([f64::NAN; 3], |c| [c.x, c.y, c.z]);
     let plane_height_m = s.polygon.as_ref().map_or(center[2], |p| p.plane_height_m);
-    Site { rank: s.rank, polygon, center: [center[0], center[1]], plane_height_m, radius_m: s.safe_radius_m }
+    Site {
+        rank: s.rank,
+        polygon,
+        center: [center[0], center[1]],
+        plane_height_m,
+        radius_m: s.safe_radius_m,
+    }
 }
 
 /// The server's per-step times of a result, milliseconds, in [`STEPS`] order.
 pub fn step_times_ms(t: Option<&StageTimings>) -> Vec<Option<f64>> {
-    let Some(t) = t else { return vec![None; STEPS.len()] };
+    let Some(t) = t else {
+        return vec![None; STEPS.len()];
+    };
     let ms = |d: &Option<prost_types::Duration>| {
-        d.and_then(crate::duration_from_proto).map(|d: Duration| d.as_secs_f64() * 1e3)
+        d.and_then(crate::duration_from_proto)
+            .map(|d: Duration| d.as_secs_f64() * 1e3)
     };
     vec![
         ms(&t.queue),
@@ -147,20 +167,33 @@ pub async fn run(
     let precision = config
         .options
         .polylabel_precision_m
-        .or_else(|| info.default_options.as_ref().and_then(|o| o.polylabel_precision_m))
+        .or_else(|| {
+            info.default_options
+                .as_ref()
+                .and_then(|o| o.polylabel_precision_m)
+        })
         .unwrap_or(config.metrics.tolerance_m);
-    let params = MetricsParams { tolerance_m: precision, ..config.metrics.clone() };
+    let params = MetricsParams {
+        tolerance_m: precision,
+        ..config.metrics.clone()
+    };
     let mut records = Vec::new();
     let mut failures = Vec::new();
     for (i, scenario) in scenarios.iter().enumerate() {
         for &mode in &config.modes {
-            let options = PipelineOptions { segmentation_mode: mode.segmentation_mode() as i32, ..config.options.clone() };
+            let options = PipelineOptions {
+                segmentation_mode: mode.segmentation_mode() as i32,
+                ..config.options.clone()
+            };
             let started = Instant::now();
-            match client.detect_with(scenario.frame.clone(), Some(options)).await {
+            match client
+                .detect_with(scenario.frame.clone(), Some(options))
+                .await
+            {
                 Ok(result) => {
                     let record = record_of(scenario, mode, &result, started.elapsed(), &params);
                     if let Some(dir) = &config.overlay_dir {
-                        let any_unsafe = record.eval.sites.iter().any(|s| !s.verdict.is_safe());
+                        let any_unsafe = record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
                         if any_unsafe || config.overlay_all {
                             write_overlay(dir, scenario, mode, &result, &record)?;
                         }
@@ -168,7 +201,11 @@ pub async fn run(
                     records.push(record);
                 }
                 Err(e) if e.code().is_some() && !e.is_unreachable() => {
-                    failures.push(FrameFailure { mode, frame: scenario.name.clone(), error: e.to_string() })
+                    failures.push(FrameFailure {
+                        mode,
+                        frame: scenario.name.clone(),
+                        error: e.to_string(),
+                    })
                 }
                 Err(e) => return Err(e),
             }
@@ -186,11 +223,20 @@ fn write_overlay(
     result: &FrameResult,
     record: &FrameRecord,
 ) -> Result<(), ClientError> {
-    std::fs::create_dir_all(dir).map_err(|e| ClientError::Io { path: dir.display().to_string(), source: e })?;
+    std::fs::create_dir_all(dir).map_err(|e| ClientError::Io {
+        path: dir.display().to_string(),
+        source: e,
+    })?;
     let sites: Vec<Site> = result.sites.iter().map(site_of).collect();
     let title = format!("{} {}", scenario.name, mode.name());
-    if let Some(canvas) = super::overlay::draw_overlay(&title, &scenario.roofs, &sites, &record.eval.sites) {
-        let stem: String = scenario.name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '-' }).collect();
+    if let Some(canvas) =
+        super::overlay::draw_overlay(&title, &scenario.roofs, &sites, &record.eval.sites)
+    {
+        let stem: String = scenario
+            .name
+            .chars()
+            .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
+            .collect();
         canvas.save(&dir.join(format!("{stem}-{}.png", mode.name())))?;
     }
     Ok(())
@@ -208,8 +254,12 @@ mod tests {
         let site = LandingSite {
             rank: 2,
             polygon: Some(landing_proto::v1::Polygon {
-                shell: Some(LinearRing { points: vec![v(0.0, 0.0), v(4.0, 0.0), v(4.0, 4.0), v(0.0, 4.0)] }),
-                holes: vec![LinearRing { points: vec![v(1.0, 1.0), v(1.0, 2.0), v(2.0, 2.0)] }],
+                shell: Some(LinearRing {
+                    points: vec![v(0.0, 0.0), v(4.0, 0.0), v(4.0, 4.0), v(0.0, 4.0)],
+                }),
+                holes: vec![LinearRing {
+                    points: vec![v(1.0, 1.0), v(1.0, 2.0), v(2.0, 2.0)],
+                }],
                 plane_height_m: 30.0,
             }),
             center: Some(v(3.0, 3.0)),
@@ -217,7 +267,10 @@ mod tests {
             ..Default::default()
         };
         let s = site_of(&site);
-        assert_eq!((s.rank, s.center, s.plane_height_m, s.radius_m), (2, [3.0, 3.0], 30.0, 1.0));
+        assert_eq!(
+            (s.rank, s.center, s.plane_height_m, s.radius_m),
+            (2, [3.0, 3.0], 30.0, 1.0)
+        );
         assert_eq!(s.polygon.holes.len(), 1);
         assert!((s.polygon.area() - 15.5).abs() < 1e-9);
     }
@@ -247,7 +300,12 @@ mod tests {
             scored: true,
             target: true,
         };
-        let mut sc = Scenario { name: "t#1".into(), tags: vec![], frame, roofs: vec![roof] };
+        let mut sc = Scenario {
+            name: "t#1".into(),
+            tags: vec![],
+            frame,
+            roofs: vec![roof],
+        };
         fill_scanned_regions(&mut sc, 0.2).unwrap();
         let s = sc.roofs[0].scanned.as_ref().unwrap();
         assert!((s.area() - 16.0).abs() < 1e-6, "{s:?}");
@@ -256,7 +314,13 @@ mod tests {
     #[test]
     fn missing_timings_are_none() {
         assert_eq!(step_times_ms(None), vec![None; STEPS.len()]);
-        let t = StageTimings { total: Some(prost_types::Duration { seconds: 0, nanos: 2_500_000 }), ..Default::default() };
+        let t = StageTimings {
+            total: Some(prost_types::Duration {
+                seconds: 0,
+                nanos: 2_500_000,
+            }),
+            ..Default::default()
+        };
         let ms = step_times_ms(Some(&t));
         assert_eq!(ms[9], Some(2.5));
         assert_eq!(ms[0], None);

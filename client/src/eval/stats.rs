@@ -22,11 +22,21 @@ pub fn mean_ci95(xs: &[f64]) -> Option<MeanCi> {
     }
     let mean = v.iter().sum::<f64>() / n as f64;
     if n == 1 {
-        return Some(MeanCi { n, mean, lo: mean, hi: mean });
+        return Some(MeanCi {
+            n,
+            mean,
+            lo: mean,
+            hi: mean,
+        });
     }
     let var = v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
     let half = t975(n - 1) * (var / n as f64).sqrt();
-    Some(MeanCi { n, mean, lo: mean - half, hi: mean + half })
+    Some(MeanCi {
+        n,
+        mean,
+        lo: mean - half,
+        hi: mean + half,
+    })
 }
 
 /// The 97.5 % quantile of Student's t with `df` degrees of freedom (table to 30, then the
@@ -45,7 +55,8 @@ pub fn t975(df: usize) -> f64 {
             let v = df as f64;
             z + (z.powi(3) + z) / (4.0 * v)
                 + (5.0 * z.powi(5) + 16.0 * z.powi(3) + 3.0 * z) / (96.0 * v * v)
-                + (3.0 * z.powi(7) + 19.0 * z.powi(5) + 17.0 * z.powi(3) - 15.0 * z) / (384.0 * v.powi(3))
+                + (3.0 * z.powi(7) + 19.0 * z.powi(5) + 17.0 * z.powi(3) - 15.0 * z)
+                    / (384.0 * v.powi(3))
         }
     }
 }
@@ -60,7 +71,11 @@ pub fn quantile(xs: &[f64], q: f64) -> Option<f64> {
     v.sort_by(f64::total_cmp);
     let pos = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
     let (i, f) = (pos.floor() as usize, pos.fract());
-    Some(if i + 1 < v.len() { v[i] * (1.0 - f) + v[i + 1] * f } else { v[i] })
+    Some(if i + 1 < v.len() {
+        v[i] * (1.0 - f) + v[i + 1] * f
+    } else {
+        v[i]
+    })
 }
 
 /// The median of `xs`.
@@ -70,7 +85,12 @@ pub fn median(xs: &[f64]) -> Option<f64> {
 
 /// Percentile-bootstrap 95 % interval of `statistic` over `xs`, from `resamples` resamples drawn
 /// with a fixed-seed generator; `None` when `xs` is empty.
-pub fn bootstrap_ci95(xs: &[f64], resamples: usize, seed: u64, statistic: impl Fn(&[f64]) -> f64) -> Option<(f64, f64)> {
+pub fn bootstrap_ci95(
+    xs: &[f64],
+    resamples: usize,
+    seed: u64,
+    statistic: impl Fn(&[f64]) -> f64,
+) -> Option<(f64, f64)> {
     if xs.is_empty() || resamples == 0 {
         return None;
     }
@@ -79,7 +99,7 @@ pub fn bootstrap_ci95(xs: &[f64], resamples: usize, seed: u64, statistic: impl F
     let mut sample = vec![0.0; xs.len()];
     for _ in 0..resamples {
         for s in sample.iter_mut() {
-            *s = xs[(rng.next() % xs.len() as u64) as usize];
+            *s = xs[(rng.next_u64() % xs.len() as u64) as usize];
         }
         stats.push(statistic(&sample));
     }
@@ -91,7 +111,7 @@ pub fn bootstrap_ci95(xs: &[f64], resamples: usize, seed: u64, statistic: impl F
 pub struct SplitMix64(pub u64);
 
 impl SplitMix64 {
-    pub fn next(&mut self) -> u64 {
+    pub fn next_u64(&mut self) -> u64 {
         self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
         let mut z = self.0;
         z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
@@ -141,6 +161,9 @@ mod tests {
         let m = mean(&xs);
         assert!(a.0 < m && m < a.1, "{a:?} {m}");
         let t = mean_ci95(&xs).unwrap();
-        assert!((a.0 - t.lo).abs() < 0.3 && (a.1 - t.hi).abs() < 0.3, "{a:?} {t:?}");
+        assert!(
+            (a.0 - t.lo).abs() < 0.3 && (a.1 - t.hi).abs() < 0.3,
+            "{a:?} {t:?}"
+        );
     }
 }

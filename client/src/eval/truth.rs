@@ -27,9 +27,14 @@ pub const PARAPET_THICKNESS_M: (f64, f64) = (0.2, 0.45);
 pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, ClientError> {
     let mut out = Vec::new();
     for f in files {
-        let bytes = std::fs::read(f).map_err(|e| ClientError::Io { path: f.display().to_string(), source: e })?;
-        let pairs = pairs_from_bytes(&bytes)
-            .map_err(|reason| ClientError::Recording { path: f.display().to_string(), reason })?;
+        let bytes = std::fs::read(f).map_err(|e| ClientError::Io {
+            path: f.display().to_string(),
+            source: e,
+        })?;
+        let pairs = pairs_from_bytes(&bytes).map_err(|reason| ClientError::Recording {
+            path: f.display().to_string(),
+            reason,
+        })?;
         let name = super::cli::short_name(f);
         for (frame, truth) in pairs {
             out.push(scenario_of(&name, frame, &truth));
@@ -50,24 +55,32 @@ pub fn pairs_from_bytes(bytes: &[u8]) -> Result<Vec<(Frame, GroundTruth)>, Strin
     let mut truths: BTreeMap<u64, GroundTruth> = BTreeMap::new();
     for message in mcap::MessageStream::new(bytes).map_err(|e| e.to_string())? {
         let message = message.map_err(|e| e.to_string())?;
-        let Some(schema) = message.channel.schema.as_ref() else { continue };
+        let Some(schema) = message.channel.schema.as_ref() else {
+            continue;
+        };
         match schema.name.as_str() {
             FRAME_SCHEMA => {
-                let f = Frame::decode(&message.data[..]).map_err(|e| format!("{FRAME_SCHEMA}: {e}"))?;
+                let f =
+                    Frame::decode(&message.data[..]).map_err(|e| format!("{FRAME_SCHEMA}: {e}"))?;
                 frames.insert(f.sequence, f);
             }
             TRUTH_SCHEMA => {
-                let t = GroundTruth::decode(&message.data[..]).map_err(|e| format!("{TRUTH_SCHEMA}: {e}"))?;
+                let t = GroundTruth::decode(&message.data[..])
+                    .map_err(|e| format!("{TRUTH_SCHEMA}: {e}"))?;
                 truths.insert(t.sequence, t);
             }
             _ => {}
         }
     }
-    Ok(frames.into_iter().filter_map(|(seq, f)| truths.remove(&seq).map(|t| (f, t))).collect())
+    Ok(frames
+        .into_iter()
+        .filter_map(|(seq, f)| truths.remove(&seq).map(|t| (f, t)))
+        .collect())
 }
 
 fn ring(r: Option<&LinearRing>) -> Vec<P2> {
-    r.map(|r| r.points.iter().map(|p| [p.x, p.y]).collect()).unwrap_or_default()
+    r.map(|r| r.points.iter().map(|p| [p.x, p.y]).collect())
+        .unwrap_or_default()
 }
 
 /// Converts one frame's ground truth. Small buildings standing on a roof (obstacles of class
@@ -81,7 +94,10 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
         let landable = r
             .landable_region
             .as_ref()
-            .map(|p| Polygon2 { shell: ring(p.shell.as_ref()), holes: vec![] })
+            .map(|p| Polygon2 {
+                shell: ring(p.shell.as_ref()),
+                holes: vec![],
+            })
             .unwrap_or_default();
         let interior = interior_of(&outline, &landable, r.parapet_height_m);
         let obstacles: Vec<Obstacle> = r
@@ -124,14 +140,26 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
         });
     }
     roofs.extend(raised);
-    Scenario { name: format!("{file}#{}", frame.sequence), tags: tags_of(truth), frame, roofs }
+    Scenario {
+        name: format!("{file}#{}", frame.sequence),
+        tags: tags_of(truth),
+        frame,
+        roofs,
+    }
 }
 
 /// Hard-case tags of a frame, from its target roof (the first) and the roofs around it.
 pub fn tags_of(truth: &GroundTruth) -> Vec<String> {
     let mut tags = Vec::new();
-    let Some(target) = truth.roofs.first() else { return tags };
-    let seen = |c: SemanticClass| target.obstacles.iter().any(|o| o.semantic_class == c as i32 && o.seen_by_lidar);
+    let Some(target) = truth.roofs.first() else {
+        return tags;
+    };
+    let seen = |c: SemanticClass| {
+        target
+            .obstacles
+            .iter()
+            .any(|o| o.semantic_class == c as i32 && o.seen_by_lidar)
+    };
     if seen(SemanticClass::Tarp) {
         tags.push("tarp".to_string());
     }
@@ -141,8 +169,26 @@ pub fn tags_of(truth: &GroundTruth) -> Vec<String> {
     if target.parapet_height_m > 0.0 {
         tags.push("parapet".to_string());
     }
-    if truth.roofs.iter().skip(1).any(|r| (r.height_m - target.height_m).abs() > 0.5) {
+    if truth
+        .roofs
+        .iter()
+        .skip(1)
+        .any(|r| (r.height_m - target.height_m).abs() > 0.5)
+    {
         tags.push("adjacent_roofs".to_string());
+    }
+    // Point density on the roof falls with height: tag the frames with the LiDAR's height above
+    // the target roof.
+    if let Some(z) = truth
+        .lidar_pose
+        .as_ref()
+        .and_then(|p| p.position.as_ref())
+        .map(|p| p.z)
+    {
+        let above = z - target.height_m;
+        // Nearest 10 m: approaches fly at 40, 30, 20 and 10 m.
+        let band = ((above / 10.0).round().clamp(0.0, 99.0) as u32) * 10;
+        tags.push(format!("altitude_{band:02}m"));
     }
     tags
 }
@@ -154,7 +200,9 @@ pub fn interior_of(outline: &Polygon2, landable: &Polygon2, parapet_height_m: f6
     if parapet_height_m <= 0.0 {
         return outline.clone();
     }
-    let Some((lo, hi)) = outline.bounds() else { return outline.clone() };
+    let Some((lo, hi)) = outline.bounds() else {
+        return outline.clone();
+    };
     let is_rect = outline.shell.len() == 4
         && outline.shell.iter().all(|p| {
             ((p[0] - lo[0]).abs() < 1e-6 || (p[0] - hi[0]).abs() < 1e-6)
@@ -164,7 +212,12 @@ pub fn interior_of(outline: &Polygon2, landable: &Polygon2, parapet_height_m: f6
         return outline.clone();
     }
     let gap = bounds_of(&landable.shell)
-        .map(|(a, b)| (a[0] - lo[0]).min(a[1] - lo[1]).min(hi[0] - b[0]).min(hi[1] - b[1]))
+        .map(|(a, b)| {
+            (a[0] - lo[0])
+                .min(a[1] - lo[1])
+                .min(hi[0] - b[0])
+                .min(hi[1] - b[1])
+        })
         .unwrap_or(PARAPET_THICKNESS_M.1);
     let t = gap.clamp(PARAPET_THICKNESS_M.0, PARAPET_THICKNESS_M.1);
     Polygon2::rect([lo[0] + t, lo[1] + t], [hi[0] - t, hi[1] - t])

@@ -1,0 +1,75 @@
+//! The real binary as a server process: it binds, serves, and on SIGTERM drains and exits 0.
+
+use std::io::{BufRead as _, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use landing_proto::v1;
+use landing_proto::v1::landing_service_client::LandingServiceClient;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_drains_and_exits_zero() {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_landing-server"))
+        .args(["serve", "--listen", "127.0.0.1:0", "--metrics-listen", ""])
+        .env("LANDING__SEGMENTATION__ENABLED", "false")
+        .env("LANDING__LOG__FORMAT", "json")
+        .env("LANDING__SERVER__SHUTDOWN_GRACE_S", "5")
+        .env_remove("RUST_LOG")
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut log = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let addr = loop {
+        let line = rx
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .expect("no 'serving' log line");
+        log.push(line.clone());
+        let Ok(doc) = serde_json::from_str::<serde_json::Value>(&line) else {
+            continue;
+        };
+        if doc["fields"]["message"] == "serving landing.v1" {
+            break doc["fields"]["addr"].as_str().unwrap().to_owned();
+        }
+    };
+    let mut client = LandingServiceClient::connect(format!("http://{addr}"))
+        .await
+        .unwrap();
+    let info = client
+        .get_service_info(v1::GetServiceInfoRequest {})
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(info.version, env!("CARGO_PKG_VERSION"));
+
+    let status = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let started = Instant::now();
+    let exit = loop {
+        if let Some(exit) = child.try_wait().unwrap() {
+            break exit;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(10),
+            "still running 10 s after SIGTERM"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    log.extend(rx.try_iter());
+    assert!(exit.success(), "exit {exit:?}; log:\n{}", log.join("\n"));
+    let log = log.join("\n");
+    assert!(
+        log.contains("SIGTERM received") && log.contains("draining") && log.contains("stopped"),
+        "{log}"
+    );
+}
