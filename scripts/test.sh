@@ -31,7 +31,7 @@ cleanup() {
   rm -rf "$tmp"
 }
 trap cleanup EXIT
-target/release/landing-sim record --seed 7 --frames 6 --out "$tmp/check.mcap"
+target/release/landing-sim record --seed 7 --frames 12 --out "$tmp/check.mcap"
 "$py" sim/tests/python/check_mcap.py "$tmp/check.mcap"
 "$py" sim/tests/python/check_mcap.py samples/rooftops.mcap
 
