@@ -145,23 +145,13 @@ pub fn to_table(out: &FrameOutput) -> String {
 }
 
 fn timings_us(out: &FrameOutput) -> serde_json::Value {
-    let t = &out.timings;
-    let mut map = serde_json::Map::new();
-    for (name, d) in [
-        ("decode", t.decode),
-        ("segmentation", t.segmentation),
-        ("classification", t.classification),
-        ("triangulation", t.triangulation),
-        ("triangle_filter", t.triangle_filter),
-        ("plane_extraction", t.plane_extraction),
-        ("polygon_extraction", t.polygon_extraction),
-        ("polylabel", t.polylabel),
-        ("total", t.total),
-    ] {
-        if let Some(d) = d {
-            map.insert(name.to_owned(), json!(micros(d)));
-        }
-    }
+    // The offline command has no queue; every other step that ran is reported.
+    let map = out
+        .timings
+        .named()
+        .filter(|(name, _)| *name != "queue")
+        .map(|(name, d)| (name.to_owned(), json!(micros(d))))
+        .collect();
     serde_json::Value::Object(map)
 }
 

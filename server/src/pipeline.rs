@@ -103,6 +103,27 @@ pub struct StageTimings {
     pub total: Option<Duration>,
 }
 
+impl StageTimings {
+    /// The steps that ran, by their `landing.v1.StageTimings` field names, in pipeline order
+    /// (`queue` first, `total` last): one list for the JSON output and the metrics alike.
+    pub fn named(&self) -> impl Iterator<Item = (&'static str, Duration)> {
+        [
+            ("queue", self.queue),
+            ("decode", self.decode),
+            ("segmentation", self.segmentation),
+            ("classification", self.classification),
+            ("triangulation", self.triangulation),
+            ("triangle_filter", self.triangle_filter),
+            ("plane_extraction", self.plane_extraction),
+            ("polygon_extraction", self.polygon_extraction),
+            ("polylabel", self.polylabel),
+            ("total", self.total),
+        ]
+        .into_iter()
+        .filter_map(|(name, d)| d.map(|d| (name, d)))
+    }
+}
+
 /// One landing site in world coordinates.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Site {

@@ -152,21 +152,10 @@ impl Metrics {
     /// Records the stage timings of a computed frame.
     pub fn stages(&self, t: &crate::pipeline::StageTimings) {
         self.with(|| {
-            for (stage, d) in [
-                ("queue", t.queue),
-                ("decode", t.decode),
-                ("segmentation", t.segmentation),
-                ("classification", t.classification),
-                ("triangulation", t.triangulation),
-                ("triangle_filter", t.triangle_filter),
-                ("plane_extraction", t.plane_extraction),
-                ("polygon_extraction", t.polygon_extraction),
-                ("polylabel", t.polylabel),
-            ] {
-                if let Some(d) = d {
-                    metrics::histogram!("landing_stage_seconds", "stage" => stage)
-                        .record(d.as_secs_f64());
-                }
+            // `total` is its own histogram; the stages are the steps inside it.
+            for (stage, d) in t.named().filter(|(name, _)| *name != "total") {
+                metrics::histogram!("landing_stage_seconds", "stage" => stage)
+                    .record(d.as_secs_f64());
             }
         });
     }
