@@ -46,6 +46,8 @@ pub mod validation;
 use std::time::{Duration, Instant};
 
 pub use class::SemanticClass;
+pub use polylabel::Disk;
+pub use ranking::KeepOut;
 pub use triangulation::{Triangulation, TriangulationConfig, Triangulator};
 
 /// Largest accepted absolute coordinate, metres. Beyond it f32 input has less than a metre of
@@ -200,6 +202,16 @@ impl Polygon {
         validation::check_polygon(self)
     }
 
+    /// The shell's bounding box `[min x, min y, max x, max y]` (zeros when empty).
+    pub fn bounds(&self) -> [f64; 4] {
+        let Some(&[x, y]) = self.shell.first() else {
+            return [0.0; 4];
+        };
+        self.shell.iter().fold([x, y, x, y], |b, p| {
+            [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
+        })
+    }
+
     /// Signed distance from `p` to the polygon's boundary: positive inside, negative outside.
     pub fn signed_distance(&self, p: [f64; 2]) -> f64 {
         polylabel::signed_distance(self, p)
@@ -310,6 +322,33 @@ pub fn detect_with(
     params: &Params,
     triangulation: &TriangulationConfig,
 ) -> Result<Detection, GeometryError> {
+    run(points, classes, params, triangulation, None)
+}
+
+/// [`detect`] whose safe circles also stay clear of obstacles that the points missed
+/// (`keep_out`: the camera's obstacle pixels, say).
+pub fn detect_keeping_out(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    params: &Params,
+    keep_out: &dyn KeepOut,
+) -> Result<Detection, GeometryError> {
+    run(
+        points,
+        classes,
+        params,
+        &TriangulationConfig::default(),
+        Some(keep_out),
+    )
+}
+
+fn run(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    params: &Params,
+    triangulation: &TriangulationConfig,
+    keep_out: Option<&dyn KeepOut>,
+) -> Result<Detection, GeometryError> {
     params.validate()?;
     check_points(points, classes)?;
     let pts: Vec<[f64; 3]> = points
@@ -342,7 +381,12 @@ pub fn detect_with(
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
-    let sites = ranking::rank_sites(&regions, polygons, &ranking::RankingParams::from(params))?;
+    let sites = ranking::rank_sites(
+        &regions,
+        polygons,
+        &ranking::RankingParams::from(params),
+        keep_out,
+    )?;
     timings.polylabel = t4.elapsed();
 
     Ok(Detection {

@@ -8,6 +8,11 @@
 //! cannot beat the best centre found so far by more than the precision. When the queue is empty the
 //! best centre is within the precision of the optimum. Unlike the `polylabel` crate this returns
 //! the distance and needs no `geo`.
+//!
+//! [`polylabel_avoiding`] also keeps the circle clear of keep-out [`Disk`]s: obstacles that are
+//! not part of the polygon (seen by the camera but missed by the LiDAR, say). The distance is then
+//! `min(signed distance to the boundary, distance to the nearest disk's rim)`, still 1-Lipschitz,
+//! so the same search keeps the same precision guarantee.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -41,11 +46,28 @@ pub struct Pole {
     pub distance: f64,
 }
 
+/// A circle that a safe circle must not overlap: centre x, y and radius, metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Disk {
+    pub center: [f64; 2],
+    pub radius: f64,
+}
+
 /// Finds the pole of inaccessibility of `polygon` within `params.precision_m` of the optimum.
 ///
 /// A polygon with an empty or degenerate shell gives distance 0 at the first shell vertex (or the
 /// origin when there is none).
 pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, GeometryError> {
+    polylabel_avoiding(polygon, &[], params)
+}
+
+/// [`polylabel`] for a circle that must also stay clear of every disk of `keep_out`. The returned
+/// distance is clamped at 0: a polygon that the disks cover entirely gives 0.
+pub fn polylabel_avoiding(
+    polygon: &Polygon,
+    keep_out: &[Disk],
+    params: &PolylabelParams,
+) -> Result<Pole, GeometryError> {
     if !(params.precision_m > 0.0 && params.precision_m.is_finite()) {
         return Err(GeometryError::InvalidParameter {
             field: "polylabel_precision_m",
@@ -59,7 +81,10 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
             distance: 0.0,
         });
     };
-    let edges = Edges::new(polygon);
+    let field = Field {
+        edges: Edges::new(polygon),
+        disks: DiskGrid::new(keep_out),
+    };
     let (mut min, mut max) = (first, first);
     for p in &polygon.shell {
         min = [min[0].min(p[0]), min[1].min(p[1])];
@@ -84,15 +109,15 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
     while x < max[0] {
         let mut y = min[1];
         while y < max[1] {
-            heap.push(Cell::new([x + half, y + half], half, &edges));
+            heap.push(Cell::new([x + half, y + half], half, &field));
             examined += 1;
             y += cell;
         }
         x += cell;
     }
     // Start from the better of the area centroid and the box centre.
-    let mut best = Cell::new(centroid(&polygon.shell).unwrap_or(first), 0.0, &edges);
-    let mid = Cell::new([min[0] + w / 2.0, min[1] + h / 2.0], 0.0, &edges);
+    let mut best = Cell::new(centroid(&polygon.shell).unwrap_or(first), 0.0, &field);
+    let mid = Cell::new([min[0] + w / 2.0, min[1] + h / 2.0], 0.0, &field);
     if mid.d > best.d {
         best = mid;
     }
@@ -106,7 +131,7 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
         }
         let q = half / 2.0;
         for (dx, dy) in [(-q, -q), (q, -q), (-q, q), (q, q)] {
-            heap.push(Cell::new([center[0] + dx, center[1] + dy], q, &edges));
+            heap.push(Cell::new([center[0] + dx, center[1] + dy], q, &field));
         }
         examined += 4;
         if examined > params.max_cells {
@@ -126,6 +151,134 @@ pub fn polylabel(polygon: &Polygon, params: &PolylabelParams) -> Result<Pole, Ge
 /// outside every hole), negative outside.
 pub fn signed_distance(polygon: &Polygon, p: [f64; 2]) -> f64 {
     Edges::new(polygon).signed_distance(p)
+}
+
+/// What the circle must stay clear of: the polygon's boundary and the keep-out disks.
+struct Field {
+    edges: Edges,
+    disks: Option<DiskGrid>,
+}
+
+impl Field {
+    fn distance(&self, p: [f64; 2]) -> f64 {
+        let d = self.edges.signed_distance(p);
+        match &self.disks {
+            // Only a disk nearer than the boundary can lower the distance.
+            Some(grid) if d > 0.0 => grid.clearance(p, d).min(d),
+            _ => d,
+        }
+    }
+}
+
+/// Keep-out disks bucketed on a uniform grid, for "distance to the nearest rim" queries.
+struct DiskGrid {
+    disks: Vec<Disk>,
+    /// Disk indices per cell, row-major; `starts[c]..starts[c + 1]` indexes `order`.
+    starts: Vec<usize>,
+    order: Vec<usize>,
+    origin: [f64; 2],
+    cell: f64,
+    cols: usize,
+    rows: usize,
+    max_radius: f64,
+}
+
+impl DiskGrid {
+    fn new(disks: &[Disk]) -> Option<Self> {
+        let disks: Vec<Disk> = disks
+            .iter()
+            .copied()
+            .filter(|d| {
+                d.center.iter().all(|c| c.is_finite()) && d.radius.is_finite() && d.radius >= 0.0
+            })
+            .collect();
+        if disks.is_empty() {
+            return None;
+        }
+        let (mut min, mut max) = (disks[0].center, disks[0].center);
+        let mut max_radius = 0.0f64;
+        for d in &disks {
+            min = [min[0].min(d.center[0]), min[1].min(d.center[1])];
+            max = [max[0].max(d.center[0]), max[1].max(d.center[1])];
+            max_radius = max_radius.max(d.radius);
+        }
+        // About two disks per cell.
+        let (w, h) = (max[0] - min[0], max[1] - min[1]);
+        let cell = ((w * h * 2.0 / disks.len() as f64).sqrt())
+            .max(w.max(h) / 1024.0)
+            .max(1e-3);
+        let cols = (w / cell) as usize + 1;
+        let rows = (h / cell) as usize + 1;
+        let index = |d: &Disk| {
+            let c = (((d.center[0] - min[0]) / cell) as usize).min(cols - 1);
+            let r = (((d.center[1] - min[1]) / cell) as usize).min(rows - 1);
+            r * cols + c
+        };
+        let mut starts = vec![0usize; cols * rows + 1];
+        for d in &disks {
+            starts[index(d) + 1] += 1;
+        }
+        for i in 1..starts.len() {
+            starts[i] += starts[i - 1];
+        }
+        let mut fill = starts.clone();
+        let mut order = vec![0usize; disks.len()];
+        for (i, d) in disks.iter().enumerate() {
+            let c = index(d);
+            order[fill[c]] = i;
+            fill[c] += 1;
+        }
+        Some(Self {
+            disks,
+            starts,
+            order,
+            origin: min,
+            cell,
+            cols,
+            rows,
+            max_radius,
+        })
+    }
+
+    /// `min(limit, distance from p to the nearest disk's rim)` (negative inside a disk): rings of
+    /// cells around p's cell, stopping once no farther ring can beat the best found or `limit`.
+    fn clearance(&self, p: [f64; 2], limit: f64) -> f64 {
+        let cx = ((p[0] - self.origin[0]) / self.cell).floor();
+        let cy = ((p[1] - self.origin[1]) / self.cell).floor();
+        let clamp = |v: f64, n: usize| v.clamp(0.0, (n - 1) as f64) as usize;
+        let (ci, cj) = (clamp(cx, self.cols), clamp(cy, self.rows));
+        // Distance from p to the grid's box: no disk centre is nearer.
+        let far = [
+            self.origin[0] + self.cols as f64 * self.cell,
+            self.origin[1] + self.rows as f64 * self.cell,
+        ];
+        let gx = (self.origin[0] - p[0]).max(p[0] - far[0]).max(0.0);
+        let gy = (self.origin[1] - p[1]).max(p[1] - far[1]).max(0.0);
+        let gap = gx.hypot(gy);
+        let mut best = limit;
+        for k in 0..self.cols.max(self.rows) {
+            // Every cell of ring k is at least (k - 1) cells away from p, and no nearer than the box.
+            if ((k as f64 - 1.0) * self.cell).max(gap) - self.max_radius >= best {
+                break;
+            }
+            let (i0, i1) = (ci.saturating_sub(k), (ci + k).min(self.cols - 1));
+            let (j0, j1) = (cj.saturating_sub(k), (cj + k).min(self.rows - 1));
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    if i.abs_diff(ci) != k && j.abs_diff(cj) != k {
+                        continue; // inside the ring, done before
+                    }
+                    let c = j * self.cols + i;
+                    for &d in &self.order[self.starts[c]..self.starts[c + 1]] {
+                        let disk = &self.disks[d];
+                        let dist = (p[0] - disk.center[0]).hypot(p[1] - disk.center[1]);
+                        best = best.min(dist - disk.radius);
+                    }
+                }
+            }
+        }
+        best
+    }
 }
 
 /// All edges of all rings as flat segments (ax, ay, bx, by), in chunks of consecutive edges with
@@ -244,8 +397,8 @@ struct Cell {
 }
 
 impl Cell {
-    fn new(center: [f64; 2], half: f64, edges: &Edges) -> Self {
-        let d = edges.signed_distance(center);
+    fn new(center: [f64; 2], half: f64, field: &Field) -> Self {
+        let d = field.distance(center);
         Self {
             center,
             half,
@@ -353,5 +506,99 @@ mod tests {
             },
         );
         assert!(matches!(r, Err(GeometryError::InvalidParameter { .. })));
+    }
+
+    #[test]
+    fn a_keep_out_disk_pushes_the_pole_aside() {
+        let p = Polygon {
+            shell: square(0.0, 0.0, 10.0),
+            holes: vec![],
+        };
+        let params = PolylabelParams {
+            precision_m: 0.01,
+            ..Default::default()
+        };
+        let disk = Disk {
+            center: [5.0, 5.0],
+            radius: 1.0,
+        };
+        let pole = polylabel_avoiding(&p, &[disk], &params).unwrap();
+        let clear = (pole.center[0] - 5.0).hypot(pole.center[1] - 5.0) - 1.0;
+        assert!(clear >= pole.distance - 1e-9, "{pole:?}");
+        assert!(p.signed_distance(pole.center) >= pole.distance - 1e-9);
+        // The best circle sits in a corner, touching two sides and the disk:
+        // r = (5 - r)·√2 - 1  =>  r = (5√2 - 1) / (1 + √2).
+        let optimum = (5.0 * std::f64::consts::SQRT_2 - 1.0) / (1.0 + std::f64::consts::SQRT_2);
+        assert!((pole.distance - optimum).abs() <= 0.01 + 1e-9, "{pole:?} vs {optimum}");
+        // Disks outside the polygon change nothing.
+        let far = Disk {
+            center: [30.0, 30.0],
+            radius: 2.0,
+        };
+        assert_eq!(
+            polylabel_avoiding(&p, &[far], &params).unwrap(),
+            polylabel(&p, &params).unwrap()
+        );
+        // A disk over everything leaves no safe point.
+        let cover = Disk {
+            center: [5.0, 5.0],
+            radius: 8.0,
+        };
+        assert_eq!(polylabel_avoiding(&p, &[cover], &params).unwrap().distance, 0.0);
+    }
+
+    /// Random polygons and random disks: the circle is clear of the boundary and of every disk,
+    /// and no point of a fine lattice does better by more than the precision.
+    #[test]
+    fn circles_avoiding_random_disks_are_clear_and_near_optimal() {
+        let mut rng = crate::synthetic::Pcg32::new(7);
+        let precision = 0.05;
+        for case in 0..40 {
+            let size = rng.range(4.0, 20.0);
+            let mut hole = square(size * 0.3, size * 0.4, size * 0.2);
+            hole.reverse();
+            let p = Polygon {
+                shell: square(0.0, 0.0, size),
+                holes: if case % 2 == 0 { vec![hole] } else { vec![] },
+            };
+            let n = 1 + (rng.next_u32() % 300) as usize;
+            let disks: Vec<Disk> = (0..n)
+                .map(|_| Disk {
+                    center: [rng.range(-1.0, size + 1.0), rng.range(-1.0, size + 1.0)],
+                    radius: rng.range(0.0, 0.3),
+                })
+                .collect();
+            let params = PolylabelParams {
+                precision_m: precision,
+                ..Default::default()
+            };
+            let pole = polylabel_avoiding(&p, &disks, &params).unwrap();
+            let clearance = |q: [f64; 2]| {
+                disks
+                    .iter()
+                    .map(|d| (q[0] - d.center[0]).hypot(q[1] - d.center[1]) - d.radius)
+                    .fold(p.signed_distance(q), f64::min)
+            };
+            assert!(
+                clearance(pole.center) >= pole.distance - 1e-9,
+                "case {case}: {pole:?} is not clear"
+            );
+            let steps = 120;
+            let mut best = f64::NEG_INFINITY;
+            for i in 0..=steps {
+                for j in 0..=steps {
+                    let q = [
+                        size * i as f64 / steps as f64,
+                        size * j as f64 / steps as f64,
+                    ];
+                    best = best.max(clearance(q));
+                }
+            }
+            assert!(
+                best <= pole.distance + precision + 1e-9,
+                "case {case}: lattice finds {best}, polylabel {}",
+                pole.distance
+            );
+        }
     }
 }

@@ -6,7 +6,7 @@
 //! the polygon) and stops once `max_sites` sites beat every remaining bound: the result is the same
 //! as running it on every region.
 
-use crate::polylabel::{PolylabelParams, polylabel};
+use crate::polylabel::{Disk, PolylabelParams, polylabel_avoiding};
 use crate::regions::Regions;
 use crate::validation::ring_signed_area;
 use crate::{GeometryError, LandingSite, Params, Polygon};
@@ -46,11 +46,28 @@ impl From<&Params> for RankingParams {
     }
 }
 
-/// Turns the polygons of `regions` (one each, same order) into ranked landing sites.
+/// Obstacles that the point cloud missed (seen by the camera, say), as keep-out disks on a
+/// landing plane: a site's safe circle stays clear of them.
+pub trait KeepOut {
+    /// The disks (world x/y) on the plane through `point` with unit `normal` (z up) that reach
+    /// into `bounds` (`[min x, min y, max x, max y]`, the polygon's box); others may be left out.
+    fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk>;
+}
+
+impl<F: Fn([f64; 3], [f64; 3], [f64; 4]) -> Vec<Disk>> KeepOut for F {
+    fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk> {
+        self(point, normal, bounds)
+    }
+}
+
+/// Turns the polygons of `regions` (one each, same order) into ranked landing sites, each safe
+/// circle also clear of what `keep_out` gives for its plane; a polygon that the keep-out disks
+/// cover entirely gives no site.
 pub fn rank_sites(
     regions: &Regions,
     polygons: Vec<Polygon>,
     params: &RankingParams,
+    keep_out: Option<&dyn KeepOut>,
 ) -> Result<Vec<LandingSite>, GeometryError> {
     if polygons.len() != regions.regions.len() {
         return Err(GeometryError::InvalidMesh {
@@ -91,11 +108,15 @@ pub fn rank_sites(
                 break;
             }
         }
-        let pole = polylabel(&polygon, &params.polylabel)?;
-        if pole.distance < params.min_safe_radius_m {
+        let region = &regions.regions[r];
+        let disks = keep_out.map_or_else(Vec::new, |k| {
+            k.disks_on_plane(region.mean, region.normal, polygon.bounds())
+        });
+        let pole = polylabel_avoiding(&polygon, &disks, &params.polylabel)?;
+        if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0)
+        {
             continue;
         }
-        let region = &regions.regions[r];
         let [nx, ny, nz] = region.normal;
         let [mx, my, mz] = region.mean;
         let cz = mz - (nx * (pole.center[0] - mx) + ny * (pole.center[1] - my)) / nz;

@@ -26,6 +26,7 @@ import torch.nn.functional as F
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from seg.data import load_split, to_input, to_target  # noqa: E402
+from seg.warm_start import load_onnx_weights, onnx_training  # noqa: E402
 from seg.models import ARCHITECTURES, NUM_OUTPUTS, build, count_parameters  # noqa: E402
 
 
@@ -36,8 +37,8 @@ def parse_size(text: str | None):
     return int(w), int(h)
 
 
-def class_weights(labels: np.ndarray) -> torch.Tensor:
-    """Softened median-frequency balancing over the 14 predicted classes: (median / freq)^0.3,
+def class_weights(labels: np.ndarray, power: float = 0.3) -> torch.Tensor:
+    """Softened median-frequency balancing over the 14 predicted classes: (median / freq)^power,
     clipped to [0.3, 3], so rare obstacles count more without starving the large classes."""
     counts = np.bincount(labels.reshape(-1), minlength=NUM_OUTPUTS + 1)[1:].astype(np.float64)
     freq = counts / max(counts.sum(), 1.0)
@@ -45,7 +46,7 @@ def class_weights(labels: np.ndarray) -> torch.Tensor:
     w = np.ones(NUM_OUTPUTS)
     if present.any():
         med = np.median(freq[present])
-        w[present] = (med / freq[present]) ** 0.3
+        w[present] = (med / freq[present]) ** power
     return torch.tensor(np.clip(w, 0.3, 3.0), dtype=torch.float32)
 
 
@@ -67,6 +68,10 @@ def main(argv=None) -> int:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--init", help="start from this checkpoint's weights (fine-tuning) instead of "
                                   "from scratch")
+    p.add_argument("--init-onnx", help="start from the weights of an exported model (e.g. the "
+                                       "shipped one) of the same architecture and width")
+    p.add_argument("--balance", type=float, default=0.3,
+                   help="class weight exponent: (median / freq)^balance, 0 = unweighted")
     p.add_argument("--out", required=True, help="checkpoint path (.pt)")
     args = p.parse_args(argv)
 
@@ -81,7 +86,7 @@ def main(argv=None) -> int:
     crop = parse_size(args.crop)
     if crop is not None and (crop[0] > w or crop[1] > h):
         raise SystemExit(f"--crop {args.crop} is larger than the {w}x{h} images")
-    weights = class_weights(labels)
+    weights = class_weights(labels, args.balance)
     print("class weights:", [round(float(x), 2) for x in weights], flush=True)
 
     net = build(args.arch, args.width)
@@ -91,6 +96,10 @@ def main(argv=None) -> int:
         if prior["arch"] != args.arch or prior["width"] != args.width:
             raise SystemExit(f"--init {args.init} is {prior['arch']} x{prior['width']}")
         net.load_state_dict(prior["state_dict"])
+    if args.init_onnx:
+        calibration = to_input(images[rng.choice(n, size=min(n, 32), replace=False)])
+        load_onnx_weights(net, args.init_onnx, calibration)
+        print(f"initialised from {args.init_onnx}", flush=True)
     print(f"{args.arch}: {count_parameters(net)} parameters", flush=True)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
 
@@ -179,8 +188,9 @@ def main(argv=None) -> int:
             "final_loss": loss_avg,
             "command": " ".join([os.path.relpath(sys.argv[0])] + (argv or sys.argv[1:])),
             "torch": torch.__version__,
-            "init": args.init,
-            "previous": prior["training"] if prior else None,
+            "init": args.init or args.init_onnx,
+            "balance": args.balance,
+            "previous": prior["training"] if prior else onnx_training(args.init_onnx),
         },
     }
     tmp = out.with_suffix(".tmp")

@@ -8,6 +8,8 @@
 //! - [`ClassMask`]: one `SemanticClass` id per pixel (`0` unknown … `14` vegetation, the numbers
 //!   of `landing_geometry::SemanticClass` and of the proto enum).
 //! - [`CameraModel`] and [`classify_points`]: world points → camera frame → pixel → class.
+//! - [`ObstacleRays`]: the mask's obstacle pixels as keep-out disks on a candidate landing plane,
+//!   for the obstacles that the LiDAR's scan lines missed.
 //!
 //! ONNX Runtime is loaded at run time from `ORT_DYLIB_PATH` or `.ort/libonnxruntime.so`, which
 //! `scripts/setup-ort.sh` installs from the PyPI `onnxruntime==1.31.1` wheel. This crate knows
@@ -39,11 +41,13 @@ pub mod camera;
 pub mod decode;
 pub mod error;
 pub mod mask;
+pub mod keep_out;
 pub mod segmenter;
 
 pub use camera::{CameraModel, classify_points};
 pub use decode::{ImageData, NORMALIZE_MEAN, NORMALIZE_STD, decode_image, preprocess};
 pub use error::PerceptionError;
+pub use keep_out::ObstacleRays;
 pub use image::RgbImage;
 pub use mask::{ClassMask, Confusion, IouReport, iou};
 pub use segmenter::{

@@ -46,8 +46,8 @@ pub enum Error {
         capacity: usize,
         retry_after: Duration,
     },
-    /// The caller's deadline passed before the frame was computed.
-    #[error("the deadline passed before the frame was processed")]
+    /// The caller's deadline passed before the frame's result was ready.
+    #[error("the caller's deadline passed before the frame's result was ready")]
     DeadlineExceeded,
     /// The caller went away.
     #[error("the call was cancelled")]

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use landing_geometry::Params;
+use landing_geometry::{Disk, Params};
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
 use crate::Error;
@@ -248,6 +248,7 @@ pub fn run_pipeline(
         None => None,
     };
     let model_classes;
+    let mut obstacles = None;
     let classes: Option<&[u8]> = match mode {
         SegmentationMode::Model => {
             let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
@@ -255,17 +256,32 @@ pub fn run_pipeline(
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out = segmenter.classify(camera, rgb, &world)?;
+            let out =
+                segmenter.classify(camera, rgb, &world, &options.params.landable_classes)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             model_classes = out.classes;
+            obstacles = Some(out.obstacles);
             Some(&model_classes)
         }
         SegmentationMode::PointClasses => frame.cloud.classes.as_deref(),
         SegmentationMode::None | SegmentationMode::Auto => None,
     };
 
-    let detection = landing_geometry::detect(&world, classes, &options.params)?;
+    // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
+    // what fell between the LiDAR's scan lines.
+    let detection = match &obstacles {
+        Some(rays) => {
+            let keep_out = |point, normal, bounds| {
+                rays.on_plane(point, normal, bounds)
+                    .into_iter()
+                    .map(|(center, radius)| Disk { center, radius })
+                    .collect()
+            };
+            landing_geometry::detect_keeping_out(&world, classes, &options.params, &keep_out)?
+        }
+        None => landing_geometry::detect(&world, classes, &options.params)?,
+    };
     let t = detection.timings;
     timings.triangulation = Some(t.triangulation);
     timings.triangle_filter = Some(t.triangle_filter);

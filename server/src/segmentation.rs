@@ -5,8 +5,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use landing_perception::{
-    CameraModel, ExecutionProvider, ImageData, PerceptionError, RgbImage, SegmenterConfig,
-    classify_points, decode_image,
+    CameraModel, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
+    SegmenterConfig, classify_points, decode_image,
 };
 
 use crate::Error;
@@ -14,9 +14,11 @@ use crate::config::SegmentationConfig;
 use crate::pipeline::{CameraImage, ImagePixels};
 
 /// Classes of every point of a frame, from the model, with the time of each step.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct Classified {
     pub classes: Vec<u8>,
+    /// The pixels of every class outside `landable`: obstacles the points may have missed.
+    pub obstacles: ObstacleRays,
     pub segmentation: Duration,
     pub classification: Duration,
 }
@@ -96,12 +98,14 @@ impl Segmenter {
         }
     }
 
-    /// Segments the decoded `image` and gives each world point the class of its pixel.
+    /// Segments the decoded `image`, gives each world point the class of its pixel, and collects
+    /// the rays of the pixels whose class is not in `landable`.
     pub fn classify(
         &self,
         camera: &CameraImage,
         image: &RgbImage,
         world_points: &[[f32; 3]],
+        landable: &[u8],
     ) -> Result<Classified, Error> {
         let t0 = Instant::now();
         let session =
@@ -119,8 +123,10 @@ impl Segmenter {
             height: k.height,
         };
         let classes = classify_points(world_points, &model, &mask);
+        let obstacles = ObstacleRays::new(&model, &mask, |c| c != 0 && !landable.contains(&c));
         Ok(Classified {
             classes,
+            obstacles,
             segmentation: t1 - t0,
             classification: t1.elapsed(),
         })

@@ -5,7 +5,7 @@ use std::collections::HashSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use landing_geometry::Params;
@@ -272,14 +272,24 @@ fn tls_config(config: &Config) -> anyhow::Result<Option<ServerTlsConfig>> {
     Ok(Some(tls))
 }
 
-/// Bearer-token check for every service but health: `authorization: Bearer <token>`.
+/// When a call's headers arrived.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Arrived(pub Instant);
+
+/// Runs when a call's headers arrive, before its body is read, for every service but health:
+/// stamps the arrival time (the caller's deadline counts from it, see
+/// [`crate::service::deadline_of`]) and checks the bearer token (`authorization: Bearer <token>`).
 #[derive(Debug, Clone)]
 struct Auth {
     tokens: Option<Arc<HashSet<String>>>,
 }
 
 impl tonic::service::Interceptor for Auth {
-    fn call(&mut self, request: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
+        request.extensions_mut().insert(Arrived(Instant::now()));
         let Some(tokens) = &self.tokens else {
             return Ok(request);
         };

@@ -11,6 +11,7 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::convert;
+use crate::server::Arrived;
 use crate::status::{to_rpc_status, to_status};
 use crate::workers::{Dispatcher, Done};
 
@@ -24,9 +25,15 @@ pub(crate) struct LandingService {
     pub draining: watch::Receiver<bool>,
 }
 
-/// The deadline a caller set with `grpc-timeout`, if any.
-pub(crate) fn deadline_of(metadata: &tonic::metadata::MetadataMap) -> Option<Instant> {
-    let value = metadata.get("grpc-timeout")?.to_str().ok()?;
+/// How much earlier than the caller's deadline a frame is given up: tonic runs its own
+/// `grpc-timeout` timer from the same moment and, when it fires first, answers CANCELLED; giving
+/// up a little earlier answers DEADLINE_EXCEEDED, the code gRPC callers retry on.
+const DEADLINE_MARGIN: Duration = Duration::from_millis(3);
+
+/// The deadline a caller set with `grpc-timeout`, if any, counted from when the call's headers
+/// arrived (before a large body was read), less [`DEADLINE_MARGIN`].
+pub(crate) fn deadline_of<T>(request: &Request<T>) -> Option<Instant> {
+    let value = request.metadata().get("grpc-timeout")?.to_str().ok()?;
     let (digits, unit) = value.split_at(value.len().checked_sub(1)?);
     let n: u64 = digits.parse().ok()?;
     let timeout = match unit {
@@ -38,7 +45,12 @@ pub(crate) fn deadline_of(metadata: &tonic::metadata::MetadataMap) -> Option<Ins
         "n" => Duration::from_nanos(n),
         _ => return None,
     };
-    Instant::now().checked_add(timeout)
+    let arrived = request
+        .extensions()
+        .get::<Arrived>()
+        .map_or_else(Instant::now, |a| a.0);
+    let deadline = arrived.checked_add(timeout)?;
+    Some(deadline.checked_sub(DEADLINE_MARGIN).unwrap_or(arrived))
 }
 
 fn never() -> impl std::future::Future<Output = u64> + Send + 'static {
@@ -66,7 +78,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         &self,
         request: Request<v1::DetectLandingSitesRequest>,
     ) -> Result<Response<v1::DetectLandingSitesResponse>, Status> {
-        let deadline = deadline_of(request.metadata());
+        let deadline = deadline_of(&request);
         let request = request.into_inner();
         let parts = convert::request_parts(&request, &self.dispatcher.pipeline.defaults);
         // Awaited in place: if the caller goes away, tonic drops this future and the frame stops.
@@ -89,7 +101,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         &self,
         request: Request<Streaming<v1::StreamLandingSitesRequest>>,
     ) -> Result<Response<Self::StreamLandingSitesStream>, Status> {
-        let deadline = deadline_of(request.metadata());
+        let deadline = deadline_of(&request);
         let mut inbound = request.into_inner();
         let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
         // Frames in flight for this stream, in arrival order; its bound is the BLOCK back-pressure.
@@ -220,18 +232,23 @@ mod tests {
     use super::*;
 
     #[test]
-    fn grpc_timeout_header_becomes_a_deadline() {
-        let mut m = tonic::metadata::MetadataMap::new();
-        assert!(deadline_of(&m).is_none());
-        m.insert("grpc-timeout", "250m".parse().unwrap());
-        let d = deadline_of(&m).unwrap().duration_since(Instant::now());
-        assert!(
-            d <= Duration::from_millis(250) && d > Duration::from_millis(200),
-            "{d:?}"
+    fn grpc_timeout_header_becomes_a_deadline_from_arrival() {
+        let mut r = Request::new(());
+        assert!(deadline_of(&r).is_none());
+        let arrived = Instant::now() - Duration::from_millis(100);
+        r.extensions_mut().insert(Arrived(arrived));
+        r.metadata_mut()
+            .insert("grpc-timeout", "250m".parse().unwrap());
+        let d = deadline_of(&r).unwrap().duration_since(arrived);
+        assert_eq!(d, Duration::from_millis(250) - DEADLINE_MARGIN);
+        r.metadata_mut().insert("grpc-timeout", "3S".parse().unwrap());
+        assert_eq!(
+            deadline_of(&r).unwrap(),
+            arrived + Duration::from_secs(3) - DEADLINE_MARGIN
         );
-        m.insert("grpc-timeout", "3S".parse().unwrap());
-        assert!(deadline_of(&m).unwrap() > Instant::now() + Duration::from_secs(2));
-        m.insert("grpc-timeout", "7x".parse().unwrap());
-        assert!(deadline_of(&m).is_none());
+        r.metadata_mut().insert("grpc-timeout", "1u".parse().unwrap());
+        assert_eq!(deadline_of(&r).unwrap(), arrived, "never before arrival");
+        r.metadata_mut().insert("grpc-timeout", "7x".parse().unwrap());
+        assert!(deadline_of(&r).is_none());
     }
 }

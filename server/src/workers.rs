@@ -153,6 +153,7 @@ impl Dispatcher {
                 None => std::future::pending().await,
             }
         };
+        tokio::pin!(expired);
         let worker = tokio::select! {
             biased;
             permit = self.workers.clone().acquire_owned() => match permit {
@@ -160,7 +161,7 @@ impl Dispatcher {
                 Err(_) => return Done::Failed(Error::Internal("the worker pool is closed".into())),
             },
             by = superseded => return Done::Skipped { superseded_by: by },
-            () = expired => return Done::Failed(Error::DeadlineExceeded),
+            () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
         };
         if deadline.is_some_and(|d| Instant::now() >= d) {
             return Done::Failed(Error::DeadlineExceeded);
@@ -176,7 +177,13 @@ impl Dispatcher {
             let _permits = (admission, worker);
             run_pipeline(&frame, &options, &pipeline)
         });
-        let result = job.await;
+        // A frame that outlives the caller's deadline is answered DEADLINE_EXCEEDED at once; its
+        // computation cannot be interrupted and finishes in the background, keeping its permits.
+        let result = tokio::select! {
+            biased;
+            joined = job => joined,
+            () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
+        };
         drop(in_flight);
         let spent = started.elapsed().as_micros() as u64;
         let old = self.average_us.load(Ordering::Relaxed);

@@ -1,7 +1,10 @@
 //! Bad input: a clear error naming the field, and nothing else lost.
 
+use std::time::Duration;
+
 use landing_client::v1::{Frame, PipelineOptions, SegmentationMode};
-use landing_client::{ClientError, FrameOutcome};
+use landing_client::{ClientError, FrameOutcome, LandingClient};
+use landing_geometry::synthetic::{Scene, SceneParams};
 
 use crate::support::{TestServer, check_frames, mode, scene};
 
@@ -57,5 +60,31 @@ async fn unary_errors_name_the_field() {
     };
     assert_eq!(e.code, tonic::Code::InvalidArgument);
     assert!(e.fields().contains(&"frame.point_cloud"), "{e}");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_deadline_that_passes_during_the_computation_is_deadline_exceeded() {
+    let server = TestServer::start().await;
+    let mut config = server.client_config();
+    config.request_timeout = Some(Duration::from_millis(60));
+    let client = LandingClient::connect(config).await.expect("connect");
+    // 200 k points take far longer than 60 ms to triangulate and segment into planes.
+    let scene = Scene::generate(&SceneParams::with_points(200_000), 5);
+    let flat: Vec<f32> = scene.points.iter().flatten().copied().collect();
+    let frame = Frame {
+        sequence: 1,
+        point_cloud: Some(landing_server::convert::packed_xyz(&flat)),
+        ..Default::default()
+    };
+    let err = client
+        .detect_with(frame, Some(mode(SegmentationMode::None)))
+        .await
+        .unwrap_err();
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
+    // Not CANCELLED (tonic's own timer): the service gives up first and says why.
+    assert_eq!(e.code, tonic::Code::DeadlineExceeded, "{e}");
     server.stop().await;
 }
