@@ -57,7 +57,15 @@ pub const MAX_ABS_COORDINATE_M: f64 = 1e7;
 /// Smallest accepted polylabel precision, metres: finer precision makes the cell search explode.
 pub const MIN_POLYLABEL_PRECISION_M: f64 = 1e-3;
 
-/// Parameters of the whole pipeline. `Default` gives the paper's values.
+/// Default smallest safe radius returned, metres: half a delivery drone's span (≈ 0.5 m) plus
+/// its positioning error (≈ 0.5 m). Smaller circles are no landing site, and in the evaluation
+/// they were mostly tops of rooftop entrances and patches of street that segmentation took for
+/// roof (`EVALUATION.md`).
+pub const DEFAULT_MIN_SAFE_RADIUS_M: f64 = 1.0;
+
+/// Parameters of the whole pipeline. `Default` gives the paper's values, and one of ours: sites
+/// whose safe radius is under [`DEFAULT_MIN_SAFE_RADIUS_M`] are not returned (the paper returns
+/// every circle).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
     /// `l_max`: triangles with a longer (3-D) edge are dropped, metres.
@@ -91,7 +99,7 @@ impl Default for Params {
             landable_classes: vec![SemanticClass::BuildingRooftop as u8],
             min_region_triangles: 10,
             polylabel_precision_m: 0.5,
-            min_safe_radius_m: 0.0,
+            min_safe_radius_m: DEFAULT_MIN_SAFE_RADIUS_M,
             min_area_m2: 0.0,
             min_hole_area_m2: 0.0,
             max_sites: 16,
@@ -208,7 +216,12 @@ impl Polygon {
             return [0.0; 4];
         };
         self.shell.iter().fold([x, y, x, y], |b, p| {
-            [b[0].min(p[0]), b[1].min(p[1]), b[2].max(p[0]), b[3].max(p[1])]
+            [
+                b[0].min(p[0]),
+                b[1].min(p[1]),
+                b[2].max(p[0]),
+                b[3].max(p[1]),
+            ]
         })
     }
 

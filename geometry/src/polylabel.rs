@@ -529,7 +529,10 @@ mod tests {
         // The best circle sits in a corner, touching two sides and the disk:
         // r = (5 - r)·√2 - 1  =>  r = (5√2 - 1) / (1 + √2).
         let optimum = (5.0 * std::f64::consts::SQRT_2 - 1.0) / (1.0 + std::f64::consts::SQRT_2);
-        assert!((pole.distance - optimum).abs() <= 0.01 + 1e-9, "{pole:?} vs {optimum}");
+        assert!(
+            (pole.distance - optimum).abs() <= 0.01 + 1e-9,
+            "{pole:?} vs {optimum}"
+        );
         // Disks outside the polygon change nothing.
         let far = Disk {
             center: [30.0, 30.0],
@@ -544,7 +547,10 @@ mod tests {
             center: [5.0, 5.0],
             radius: 8.0,
         };
-        assert_eq!(polylabel_avoiding(&p, &[cover], &params).unwrap().distance, 0.0);
+        assert_eq!(
+            polylabel_avoiding(&p, &[cover], &params).unwrap().distance,
+            0.0
+        );
     }
 
     /// Random polygons and random disks: the circle is clear of the boundary and of every disk,

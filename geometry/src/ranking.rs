@@ -113,8 +113,7 @@ pub fn rank_sites(
             k.disks_on_plane(region.mean, region.normal, polygon.bounds())
         });
         let pole = polylabel_avoiding(&polygon, &disks, &params.polylabel)?;
-        if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0)
-        {
+        if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0) {
             continue;
         }
         let [nx, ny, nz] = region.normal;

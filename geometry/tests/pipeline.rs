@@ -4,8 +4,8 @@
 use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof};
 use landing_geometry::validation::{Location, check_detection, locate_in_ring};
 use landing_geometry::{
-    Detection, GeometryError, Params, Polygon, SemanticClass, TriangulationConfig, Triangulator,
-    detect, detect_with,
+    Detection, Disk, GeometryError, Params, Polygon, SemanticClass, TriangulationConfig,
+    Triangulator, detect, detect_keeping_out, detect_with,
 };
 
 /// Runs `detect` and checks every invariant of the result.
@@ -490,4 +490,41 @@ fn property_random_roofs_with_obstacles() {
             );
         }
     }
+}
+
+#[test]
+fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
+    // A flat 20 m roof at 10 m with no obstacle point: the best circle is central.
+    let (pts, classes) = lattice(21, 24, &[]);
+    let plain = run(&pts, Some(&classes), &Params::default());
+    let c = plain.sites[0].center;
+    // The camera saw a 1 m vent right there: a keep-out disk on the roof plane.
+    let vent = Disk {
+        center: [c[0], c[1]],
+        radius: 0.5,
+    };
+    let planes = std::cell::RefCell::new(Vec::new());
+    let keep_out = |point: [f64; 3], normal: [f64; 3], _bounds: [f64; 4]| {
+        planes.borrow_mut().push((point, normal));
+        vec![vent]
+    };
+    let d =
+        detect_keeping_out(&pts, Some(&classes), &Params::default(), &keep_out).expect("detect");
+    check_detection(&d).expect("valid detection");
+    let (point, normal) = planes.borrow()[0];
+    assert!(
+        (point[2] - 10.0).abs() < 1e-6 && normal[2] > 0.999,
+        "the roof's plane"
+    );
+    let s = &d.sites[0];
+    let clear = (s.center[0] - c[0]).hypot(s.center[1] - c[1]) - vent.radius;
+    assert!(
+        clear >= s.safe_radius_m - 1e-9,
+        "the circle reaches into the vent: {s:?}"
+    );
+    assert!(s.safe_radius_m < plain.sites[0].safe_radius_m);
+    assert!(
+        s.polygon.signed_distance([s.center[0], s.center[1]]) >= s.safe_radius_m - 1e-9,
+        "and stays inside the polygon"
+    );
 }

@@ -16,55 +16,66 @@ use crate::{CameraModel, ClassMask};
 /// Incidence below which a footprint is capped (rays almost parallel to the plane).
 const MIN_COS_INCIDENCE: f64 = 0.2;
 
+/// Side of the pixel blocks cast as one ray.
+pub const BLOCK: usize = 2;
+
 /// The rays of a mask's obstacle pixels, in the world frame.
 #[derive(Debug, Clone)]
 pub struct ObstacleRays {
     origin: Point3<f64>,
     /// Unit directions, world frame.
     rays: Vec<Vector3<f64>>,
-    /// Angle one mask pixel spans, radians (the larger of its two sides).
+    /// Angle one block spans, radians (the larger of its two sides).
     pixel_angle: f64,
 }
 
 impl ObstacleRays {
-    /// The rays through the centres of the pixels of `mask` (stretched over the camera's image)
-    /// whose class `is_obstacle` says so.
+    /// The rays through the centres of the `BLOCK × BLOCK` pixel blocks of `mask` (stretched
+    /// over the camera's image) that hold a pixel whose class `is_obstacle` says so. A block is
+    /// one disk covering all of it: conservative, and a quarter of the rays to cast per plane.
     pub fn new(camera: &CameraModel, mask: &ClassMask, is_obstacle: impl Fn(u8) -> bool) -> Self {
-        let (mw, mh) = (f64::from(mask.width()), f64::from(mask.height()));
-        let sx = f64::from(camera.width) / mw;
-        let sy = f64::from(camera.height) / mh;
+        let (w, h) = (mask.width() as usize, mask.height() as usize);
+        let sx = f64::from(camera.width) / w as f64;
+        let sy = f64::from(camera.height) / h as f64;
         let rotation = camera.pose.rotation;
+        let data = mask.as_slice();
         let mut rays = Vec::new();
-        for (index, &class) in mask.as_slice().iter().enumerate() {
-            if !is_obstacle(class) {
-                continue;
+        for by in (0..h).step_by(BLOCK) {
+            for bx in (0..w).step_by(BLOCK) {
+                let (x1, y1) = ((bx + BLOCK).min(w), (by + BLOCK).min(h));
+                let hit = (by..y1).any(|y| (bx..x1).any(|x| is_obstacle(data[y * w + x])));
+                if !hit {
+                    continue;
+                }
+                let u = (bx + x1) as f64 / 2.0 * sx;
+                let v = (by + y1) as f64 / 2.0 * sy;
+                let d = Vector3::new(
+                    (u - camera.cx) / camera.fx,
+                    (v - camera.cy) / camera.fy,
+                    1.0,
+                );
+                rays.push(rotation * d.normalize());
             }
-            let i = (index % mask.width() as usize) as f64;
-            let j = (index / mask.width() as usize) as f64;
-            let u = (i + 0.5) * sx;
-            let v = (j + 0.5) * sy;
-            let d = Vector3::new((u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, 1.0);
-            rays.push(rotation * d.normalize());
         }
         Self {
             origin: Point3::from(camera.pose.translation.vector),
             rays,
-            pixel_angle: (sx / camera.fx).max(sy / camera.fy),
+            pixel_angle: BLOCK as f64 * (sx / camera.fx).max(sy / camera.fy),
         }
     }
 
-    /// Number of obstacle pixels.
+    /// Number of obstacle blocks.
     pub fn len(&self) -> usize {
         self.rays.len()
     }
 
-    /// True when no pixel is an obstacle.
+    /// True when no block holds an obstacle.
     pub fn is_empty(&self) -> bool {
         self.rays.is_empty()
     }
 
     /// Where the rays cross the plane through `point` with unit `normal`: `(x, y, radius)` of
-    /// each pixel's footprint (a disk around it, half a pixel diagonal at that range, stretched
+    /// each block's footprint (a disk around it, half a block diagonal at that range, stretched
     /// by the incidence), for the footprints that reach into `bounds` (`[min x, min y, max x,
     /// max y]`). Rays that never reach the plane (parallel, or crossing it behind the camera)
     /// give nothing.
@@ -125,18 +136,26 @@ mod tests {
     #[test]
     fn obstacle_pixels_land_where_the_camera_sees_them() {
         let camera = nadir_camera();
-        // A 50×40 mask: one obstacle pixel (class 7) at mask (30, 10) = image (60..62, 20..22).
-        let mut data = vec![4u8; 50 * 40];
-        data[10 * 50 + 30] = 7;
-        let mask = ClassMask::new(50, 40, data).unwrap();
+        // A 100×80 mask: one obstacle pixel (class 7) at mask (61, 21), in the 2×2 block
+        // (60..62, 20..22) centred on image (61, 21).
+        let mut data = vec![4u8; 100 * 80];
+        data[21 * 100 + 61] = 7;
+        let mask = ClassMask::new(100, 80, data).unwrap();
         let rays = ObstacleRays::new(&camera, &mask, |c| c != 4);
         assert_eq!(rays.len(), 1);
         // On the roof 5 m up, 15 m below the camera: image (61, 21) is camera (0.11, -0.19) · 15.
-        let disks = rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], [-100.0, -100.0, 100.0, 100.0]);
+        let disks = rays.on_plane(
+            [0.0, 0.0, 5.0],
+            [0.0, 0.0, 1.0],
+            [-100.0, -100.0, 100.0, 100.0],
+        );
         assert_eq!(disks.len(), 1);
         let ([x, y], r) = disks[0];
-        assert!((x - 1.65).abs() < 1e-9 && (y - 2.85).abs() < 1e-9, "{x} {y}");
-        // One mask pixel spans 2 image pixels = 0.02 rad, 0.3 m at 15 m depth; half its diagonal,
+        assert!(
+            (x - 1.65).abs() < 1e-9 && (y - 2.85).abs() < 1e-9,
+            "{x} {y}"
+        );
+        // One block spans 2 image pixels = 0.02 rad, 0.3 m at 15 m depth; half its diagonal,
         // times |d|² = 1 + 0.11² + 0.19² (range along the ray, then the slant onto the plane).
         let expected = 0.3 * std::f64::consts::FRAC_1_SQRT_2 * (1.0 + 0.11 * 0.11 + 0.19 * 0.19);
         assert!((r - expected).abs() < 1e-9, "{r} vs {expected}");
@@ -144,7 +163,13 @@ mod tests {
         let (u, v) = camera.project(&Point3::new(x, y, 5.0)).unwrap();
         assert!((u - 61.0).abs() < 1e-9 && (v - 21.0).abs() < 1e-9);
         // Outside the bounds: left out. Above the camera: never reached.
-        assert!(rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], [10.0, 10.0, 20.0, 20.0]).is_empty());
-        assert!(rays.on_plane([0.0, 0.0, 25.0], [0.0, 0.0, 1.0], [-1e3, -1e3, 1e3, 1e3]).is_empty());
+        assert!(
+            rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], [10.0, 10.0, 20.0, 20.0])
+                .is_empty()
+        );
+        assert!(
+            rays.on_plane([0.0, 0.0, 25.0], [0.0, 0.0, 1.0], [-1e3, -1e3, 1e3, 1e3])
+                .is_empty()
+        );
     }
 }

@@ -40,15 +40,15 @@
 pub mod camera;
 pub mod decode;
 pub mod error;
-pub mod mask;
 pub mod keep_out;
+pub mod mask;
 pub mod segmenter;
 
 pub use camera::{CameraModel, classify_points};
 pub use decode::{ImageData, NORMALIZE_MEAN, NORMALIZE_STD, decode_image, preprocess};
 pub use error::PerceptionError;
-pub use keep_out::ObstacleRays;
 pub use image::RgbImage;
+pub use keep_out::ObstacleRays;
 pub use mask::{ClassMask, Confusion, IouReport, iou};
 pub use segmenter::{
     DEFAULT_MODEL_PATH, ExecutionProvider, ModelInfo, Segmenter, SegmenterConfig,

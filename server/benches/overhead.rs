@@ -6,6 +6,11 @@
 //! `stream_loopback`: 16 frames through one `StreamLandingSites` call, per-batch time.
 //! The server runs one geometry worker so that per-frame times compare like with like.
 //!
+//! Frames: synthetic geometry-only clouds (1.5 k and 20 k points, point classes), the last sample
+//! recording frame with point classes, and — when ONNX Runtime is installed (`.ort/` or
+//! `ORT_DYLIB_PATH`) — the same frame with `SEGMENTATION_MODE_MODEL`, the service's real
+//! workload (decode, segmentation, classification, keep-out, geometry).
+//!
 //! Run: `cargo bench -p landing-server --bench overhead`.
 
 use std::hint::black_box;
@@ -17,7 +22,7 @@ use landing_proto::v1::landing_service_client::LandingServiceClient;
 use landing_server::pipeline::Pipeline;
 use landing_server::{Config, convert, run_pipeline, start};
 
-fn frames() -> Vec<(&'static str, v1::Frame)> {
+fn frames() -> Vec<(&'static str, v1::Frame, v1::SegmentationMode)> {
     let synthetic = |points: usize, seed: u64| {
         let scene = Scene::generate(&SceneParams::with_points(points), seed);
         let flat: Vec<f32> = scene.points.iter().flatten().copied().collect();
@@ -32,18 +37,32 @@ fn frames() -> Vec<(&'static str, v1::Frame)> {
     let mut recorded =
         landing_sim::recording::read_recording(&sample).expect("samples/rooftops.mcap");
     let mut frame = recorded.swap_remove(recorded.len() - 1).frame;
-    // Point classes: the image is still sent and decoded, but the model is not in this bench.
     frame.sequence = 99;
-    vec![
-        ("synthetic_1500", synthetic(1500, 1)),
-        ("synthetic_20000", synthetic(20_000, 2)),
-        ("recorded_frame", frame),
-    ]
+    let point_classes = v1::SegmentationMode::PointClasses;
+    let mut frames = vec![
+        ("synthetic_1500", synthetic(1500, 1), point_classes),
+        ("synthetic_20000", synthetic(20_000, 2), point_classes),
+        ("recorded_frame", frame.clone(), point_classes),
+    ];
+    if model_files().is_some() {
+        frames.push(("recorded_frame_model", frame, v1::SegmentationMode::Model));
+    }
+    frames
 }
 
-fn options() -> v1::PipelineOptions {
+/// The shipped model and the ONNX Runtime library, when both are installed.
+fn model_files() -> Option<(std::path::PathBuf, std::path::PathBuf)> {
+    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
+    let model = root.join("models/rooftop-segmentation.onnx");
+    let ort = std::env::var_os("ORT_DYLIB_PATH")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| root.join(".ort/libonnxruntime.so"));
+    (model.is_file() && ort.is_file()).then_some((model, ort))
+}
+
+fn options(mode: v1::SegmentationMode) -> v1::PipelineOptions {
     v1::PipelineOptions {
-        segmentation_mode: v1::SegmentationMode::PointClasses as i32,
+        segmentation_mode: mode as i32,
         ..Default::default()
     }
 }
@@ -55,13 +74,19 @@ fn bench(c: &mut Criterion) {
         .build()
         .unwrap();
     let mut config = Config::default();
-    config.segmentation.enabled = false;
+    match model_files() {
+        Some((model, ort)) => {
+            config.segmentation.model_path = model;
+            config.segmentation.ort_library = ort;
+        }
+        None => config.segmentation.enabled = false,
+    }
     config.server.metrics_listen = String::new();
     config.pipeline.geometry_workers = 1;
     config.pipeline.stream_buffer = 16;
     let (server, channel) = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let server = start(config, listener).await.unwrap();
+        let server = start(config.clone(), listener).await.unwrap();
         let channel = tonic::transport::Channel::from_shared(format!("http://{}", server.addr))
             .unwrap()
             .connect()
@@ -70,13 +95,19 @@ fn bench(c: &mut Criterion) {
         (server, channel)
     });
     let client = LandingServiceClient::new(channel).max_decoding_message_size(64 << 20);
-    let pipeline = Pipeline::default();
+    // In process: the same pipeline as the server's, the same model loaded once more.
+    let mut pipeline = Pipeline::default();
+    if config.segmentation.enabled {
+        let segmenter = landing_server::segmentation::Segmenter::load(&config.segmentation)
+            .expect("load the model");
+        pipeline.segmenter = Some(std::sync::Arc::new(segmenter));
+    }
 
     let mut group = c.benchmark_group("overhead");
-    for (name, frame) in frames() {
+    for (name, frame, mode) in frames() {
         let request = v1::DetectLandingSitesRequest {
             frame: Some(frame.clone()),
-            options: Some(options()),
+            options: Some(options(mode)),
         };
         let (f, o) = convert::request_parts(&request, &pipeline.defaults).unwrap();
         group.throughput(Throughput::Elements(1));
@@ -109,7 +140,7 @@ fn bench(c: &mut Criterion) {
                 f.sequence = i;
                 v1::StreamLandingSitesRequest {
                     frame: Some(f),
-                    options: Some(options()),
+                    options: Some(options(mode)),
                     overflow_policy: v1::OverflowPolicy::Block as i32,
                 }
             })

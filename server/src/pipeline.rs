@@ -256,8 +256,7 @@ pub fn run_pipeline(
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out =
-                segmenter.classify(camera, rgb, &world, &options.params.landable_classes)?;
+            let out = segmenter.classify(camera, rgb, &world, &options.params.landable_classes)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             model_classes = out.classes;

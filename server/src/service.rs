@@ -50,7 +50,11 @@ pub(crate) fn deadline_of<T>(request: &Request<T>) -> Option<Instant> {
         .get::<Arrived>()
         .map_or_else(Instant::now, |a| a.0);
     let deadline = arrived.checked_add(timeout)?;
-    Some(deadline.checked_sub(DEADLINE_MARGIN).unwrap_or(arrived))
+    Some(
+        deadline
+            .checked_sub(DEADLINE_MARGIN)
+            .map_or(arrived, |d| d.max(arrived)),
+    )
 }
 
 fn never() -> impl std::future::Future<Output = u64> + Send + 'static {
@@ -241,14 +245,17 @@ mod tests {
             .insert("grpc-timeout", "250m".parse().unwrap());
         let d = deadline_of(&r).unwrap().duration_since(arrived);
         assert_eq!(d, Duration::from_millis(250) - DEADLINE_MARGIN);
-        r.metadata_mut().insert("grpc-timeout", "3S".parse().unwrap());
+        r.metadata_mut()
+            .insert("grpc-timeout", "3S".parse().unwrap());
         assert_eq!(
             deadline_of(&r).unwrap(),
             arrived + Duration::from_secs(3) - DEADLINE_MARGIN
         );
-        r.metadata_mut().insert("grpc-timeout", "1u".parse().unwrap());
+        r.metadata_mut()
+            .insert("grpc-timeout", "1u".parse().unwrap());
         assert_eq!(deadline_of(&r).unwrap(), arrived, "never before arrival");
-        r.metadata_mut().insert("grpc-timeout", "7x".parse().unwrap());
+        r.metadata_mut()
+            .insert("grpc-timeout", "7x".parse().unwrap());
         assert!(deadline_of(&r).is_none());
     }
 }

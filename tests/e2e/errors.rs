@@ -3,7 +3,10 @@
 use std::time::Duration;
 
 use landing_client::v1::{Frame, PipelineOptions, SegmentationMode};
-use landing_client::{ClientError, FrameOutcome, LandingClient};
+use landing_client::{
+    ClientError, FrameBuilder, FrameOutcome, ImageData, LandingClient, PointCloudBuilder,
+    camera_image, intrinsics_from_fov, pose,
+};
 use landing_geometry::synthetic::{Scene, SceneParams};
 
 use crate::support::{TestServer, check_frames, mode, scene};
@@ -67,22 +70,34 @@ async fn unary_errors_name_the_field() {
 async fn a_deadline_that_passes_during_the_computation_is_deadline_exceeded() {
     let server = TestServer::start().await;
     let mut config = server.client_config();
-    config.request_timeout = Some(Duration::from_millis(60));
+    config.request_timeout = Some(Duration::from_millis(30));
     let client = LandingClient::connect(config).await.expect("connect");
-    // 200 k points take far longer than 60 ms to triangulate and segment into planes.
-    let scene = Scene::generate(&SceneParams::with_points(200_000), 5);
-    let flat: Vec<f32> = scene.points.iter().flatten().copied().collect();
-    let frame = Frame {
-        sequence: 1,
-        point_cloud: Some(landing_server::convert::packed_xyz(&flat)),
-        ..Default::default()
-    };
-    let err = client
+    // A small message that is slow to compute: an 8192×4096 grey PNG (≈ 100 KiB compressed,
+    // 96 MiB decoded, ≈ 0.1 s; every image is decoded, whatever the mode) over a few points.
+    let (width, height) = (8192, 4096);
+    let mut png = Vec::new();
+    image::RgbImage::from_pixel(width, height, image::Rgb([128, 128, 128]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .expect("encode the PNG");
+    let scene = Scene::generate(&SceneParams::with_points(2000), 5);
+    let cloud = PointCloudBuilder::new(&scene.points)
+        .build()
+        .expect("cloud");
+    let camera = camera_image(
+        ImageData::Png(png),
+        pose([0.0, 0.0, 40.0], [1.0, 0.0, 0.0, 0.0]),
+        intrinsics_from_fov(width, height, 70.0),
+    )
+    .expect("camera image");
+    let frame = FrameBuilder::new(1, cloud).image(camera).build();
+    let outcome = client
         .detect_with(frame, Some(mode(SegmentationMode::None)))
-        .await
-        .unwrap_err();
-    let ClientError::Status(e) = &err else {
-        panic!("{err}")
+        .await;
+    let Err(ClientError::Status(e)) = &outcome else {
+        panic!(
+            "expected a status, got {:?}",
+            outcome.map(|r| r.timings).map_err(|e| e.to_string())
+        )
     };
     // Not CANCELLED (tonic's own timer): the service gives up first and says why.
     assert_eq!(e.code, tonic::Code::DeadlineExceeded, "{e}");
