@@ -70,16 +70,18 @@ async fn unary_errors_name_the_field() {
 async fn a_deadline_that_passes_during_the_computation_is_deadline_exceeded() {
     let server = TestServer::start().await;
     let mut config = server.client_config();
-    config.request_timeout = Some(Duration::from_millis(30));
+    config.request_timeout = Some(Duration::from_millis(250));
     let client = LandingClient::connect(config).await.expect("connect");
-    // A small message that is slow to compute: an 8192×4096 grey PNG (≈ 100 KiB compressed,
-    // 96 MiB decoded, ≈ 0.1 s; every image is decoded, whatever the mode) over a few points.
-    let (width, height) = (8192, 4096);
+    // A message that arrives well within the deadline (≈ 1.4 MB) but takes far longer to
+    // compute: an 8192×8192 grey PNG (≈ 200 KiB compressed, 192 MiB decoded, ≥ 0.1 s; every
+    // image is decoded, whatever the mode) over 100 k points (≥ 0.3 s in a test build). The
+    // handler runs, so it, not tonic's own timer (CANCELLED), answers.
+    let (width, height) = (8192, 8192);
     let mut png = Vec::new();
     image::RgbImage::from_pixel(width, height, image::Rgb([128, 128, 128]))
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .expect("encode the PNG");
-    let scene = Scene::generate(&SceneParams::with_points(2000), 5);
+    let scene = Scene::generate(&SceneParams::with_points(100_000), 5);
     let cloud = PointCloudBuilder::new(&scene.points)
         .build()
         .expect("cloud");
