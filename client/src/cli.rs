@@ -407,7 +407,13 @@ fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if is_ply {
-        let ply = crate::ply::read_ply(path)?;
+        let ply = landing_sim::ply::read(path).map_err(|e| match e {
+            landing_sim::ply::PlyError::Io { source, .. } => ClientError::io(path, source),
+            other => ClientError::Recording {
+                path: path.display().to_string(),
+                reason: other.to_string(),
+            },
+        })?;
         let mut builder = PointCloudBuilder::new(&ply.points).frame_id("world");
         if let Some(c) = &ply.classes {
             builder = builder.classes(c);

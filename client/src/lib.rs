@@ -42,7 +42,6 @@ pub mod eval;
 mod frame;
 pub mod loadtest;
 mod outcome;
-pub mod ply;
 pub mod recording;
 pub mod render;
 

@@ -12,7 +12,6 @@ use crate::Error;
 use crate::pipeline::{
     Cloud, Frame, FrameOptions, FrameOutput, Pipeline, SegmentationMode, run_pipeline,
 };
-use crate::ply;
 
 /// Reads the PLY at `path` and runs the pipeline on it (classes from the file when it has them).
 pub fn detect_ply(
@@ -20,7 +19,7 @@ pub fn detect_ply(
     options: &FrameOptions,
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
-    let cloud = ply::read(path)?;
+    let cloud = landing_sim::ply::read(path).map_err(|e| Error::from_ply(path, e))?;
     let frame = Frame {
         drone_id: String::new(),
         sequence: 0,

@@ -67,27 +67,10 @@ pub enum Error {
     /// A file could not be read.
     #[error("cannot read `{path}`: {reason}")]
     Io { path: String, reason: String },
-    /// A PLY header is malformed or unsupported.
-    #[error("PLY header, line {line}: {reason}")]
-    PlyHeader { line: usize, reason: String },
-    /// The PLY vertex element lacks a required property.
-    #[error("PLY element `{element}` has no property `{property}`")]
-    PlyMissingProperty { element: String, property: String },
-    /// A PLY property has a type this reader cannot use for its role.
-    #[error("PLY element `{element}`, property `{property}`: {reason}")]
-    PlyUnsupportedProperty {
-        element: String,
-        property: String,
-        reason: String,
-    },
-    /// PLY body data is malformed or truncated.
-    #[error("PLY data, {element} {index}, property `{property}`: {reason}")]
-    PlyData {
-        element: String,
-        index: usize,
-        property: String,
-        reason: String,
-    },
+    /// A PLY file could not be parsed (the reason names the header line, or the element, row and
+    /// property, that is wrong).
+    #[error("`{path}`: {reason}")]
+    Ply { path: String, reason: String },
 }
 
 impl Error {
@@ -101,6 +84,22 @@ impl Error {
         Self::Config {
             key: key.into(),
             reason: reason.into(),
+        }
+    }
+
+    /// A [`landing_sim::ply::PlyError`] for the file at `path`: [`Error::Io`] when the file could
+    /// not be read, [`Error::Ply`] when its contents are not a usable PLY.
+    pub fn from_ply(path: &std::path::Path, error: landing_sim::ply::PlyError) -> Self {
+        let path = path.display().to_string();
+        match error {
+            landing_sim::ply::PlyError::Io { source, .. } => Self::Io {
+                path,
+                reason: source.to_string(),
+            },
+            other => Self::Ply {
+                path,
+                reason: other.to_string(),
+            },
         }
     }
 }

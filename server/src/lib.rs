@@ -77,7 +77,6 @@ pub mod detect;
 mod error;
 pub mod geodetic;
 pub mod pipeline;
-pub mod ply;
 pub mod segmentation;
 pub mod server;
 mod service;

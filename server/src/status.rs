@@ -32,10 +32,7 @@ pub fn code_of(error: &Error) -> Code {
         // Configuration, file and PLY errors come from the command line, never from a request;
         // if one ever reaches a caller it describes the server's state, not the request.
         Error::Config { .. } | Error::Io { .. } => Code::Internal,
-        Error::PlyHeader { .. }
-        | Error::PlyMissingProperty { .. }
-        | Error::PlyUnsupportedProperty { .. }
-        | Error::PlyData { .. } => Code::InvalidArgument,
+        Error::Ply { .. } => Code::InvalidArgument,
     }
 }
 
@@ -172,32 +169,8 @@ mod tests {
                 Code::Internal,
             ),
             (
-                Error::PlyHeader {
-                    line: 1,
-                    reason: "r".into(),
-                },
-                Code::InvalidArgument,
-            ),
-            (
-                Error::PlyMissingProperty {
-                    element: "vertex".into(),
-                    property: "x".into(),
-                },
-                Code::InvalidArgument,
-            ),
-            (
-                Error::PlyUnsupportedProperty {
-                    element: "v".into(),
-                    property: "x".into(),
-                    reason: "r".into(),
-                },
-                Code::InvalidArgument,
-            ),
-            (
-                Error::PlyData {
-                    element: "v".into(),
-                    index: 0,
-                    property: "x".into(),
+                Error::Ply {
+                    path: "p".into(),
                     reason: "r".into(),
                 },
                 Code::InvalidArgument,

@@ -9,8 +9,9 @@
 //! hierarchy over analytic boxes, cylinders, cones and spheres ([`scene`]). [`flight`] makes the
 //! poses (T_world_sensor, camera in the optical convention), [`truth`] the per-frame ground truth
 //! (roofs in view, obstacle footprints, true best landing point from
-//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP files and their reader, and
-//! [`dataset`] the image/label datasets (its module docs give the manifest format).
+//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP files and their reader,
+//! [`dataset`] the image/label datasets (its module docs give the manifest format), and [`ply`] the
+//! workspace's one PLY point-cloud reader and writer (also used by the server and the client).
 //!
 //! Classes are [`landing_geometry::SemanticClass`] ids everywhere.
 //!
@@ -56,6 +57,7 @@ pub mod dataset;
 pub mod flight;
 pub mod lidar;
 pub mod math;
+pub mod ply;
 pub mod recording;
 pub mod scene;
 pub mod truth;

@@ -452,18 +452,15 @@ pub fn read_pairs(path: &Path) -> Result<Vec<(v1::Frame, v1::GroundTruth)>, SimE
 }
 
 /// Writes points (world coordinates) as a binary little-endian PLY with `x y z` float and
-/// `class` uchar.
+/// `class` uchar ([`crate::ply::write_binary`], with a comment naming the frame).
 pub fn write_ply(points: &[LidarPoint], path: &Path) -> Result<(), SimError> {
-    let mut out = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment landing-sim LiDAR scan, world coordinates (ENU, metres)\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\nproperty uchar class\nend_header\n",
-        points.len()
-    )
-    .into_bytes();
-    for p in points {
-        for v in p.world {
-            out.extend_from_slice(&(v as f32).to_le_bytes());
-        }
-        out.push(p.class);
-    }
+    let cloud = crate::ply::PlyCloud {
+        points: points.iter().map(|p| p.world.map(|v| v as f32)).collect(),
+        classes: Some(points.iter().map(|p| p.class).collect()),
+    };
+    let out = crate::ply::write_binary_with_comment(
+        &cloud,
+        Some("landing-sim LiDAR scan, world coordinates (ENU, metres)"),
+    );
     std::fs::write(path, out).map_err(|e| SimError::io(path, e))
 }

@@ -1,22 +1,58 @@
-//! A small reader for PLY point clouds (ascii and binary little-endian).
+//! The one PLY reader and writer of the workspace (ascii and binary little-endian point clouds),
+//! used by the simulator's `ply` command, the server's offline `detect --points` and the client's
+//! `landing detect FILE.ply`.
 //!
 //! Only the `vertex` element is kept: its `x`, `y`, `z` properties (any scalar type, usually
 //! `float` or `double`) and an optional per-point class from a `class` or `label` property of an
 //! integer type (values 0..=255, see [`landing_geometry::SemanticClass`]). Every other property
 //! and every other element is parsed and skipped, list properties included. Big-endian files are
-//! rejected with a clear message rather than misread.
+//! rejected with a clear message rather than misread. Errors ([`PlyError`]) name the header line,
+//! or the element, row and property, that is wrong.
 //!
 //! ```
 //! let text = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
 //! property float z\nproperty uchar class\nend_header\n0 0 1 4\n1 0 1 4\n";
-//! let cloud = landing_server::ply::parse(text).unwrap();
+//! let cloud = landing_sim::ply::parse(text).unwrap();
 //! assert_eq!(cloud.points, vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]);
 //! assert_eq!(cloud.classes, Some(vec![4, 4]));
 //! ```
 
 use std::path::Path;
 
-use crate::Error;
+/// Why a PLY file could not be read.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PlyError {
+    /// The file could not be read.
+    #[error("cannot read `{path}`: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A header line is malformed or unsupported (`line` counts from 1; 0 for the header as a
+    /// whole).
+    #[error("PLY header, line {line}: {reason}")]
+    Header { line: usize, reason: String },
+    /// The vertex element lacks a required property.
+    #[error("PLY element `{element}` has no property `{property}`")]
+    MissingProperty { element: String, property: String },
+    /// A property has a type this reader cannot use for its role.
+    #[error("PLY element `{element}`, property `{property}`: {reason}")]
+    UnsupportedProperty {
+        element: String,
+        property: String,
+        reason: String,
+    },
+    /// Body data is malformed or truncated (`index` is the row within `element`).
+    #[error("PLY data, {element} {index}, property `{property}`: {reason}")]
+    Data {
+        element: String,
+        index: usize,
+        property: String,
+        reason: String,
+    },
+}
 
 /// The points of a PLY file, with their classes when the file has them.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -28,16 +64,16 @@ pub struct PlyCloud {
 }
 
 /// Reads and parses the PLY file at `path`.
-pub fn read(path: &Path) -> Result<PlyCloud, Error> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Io {
+pub fn read(path: &Path) -> Result<PlyCloud, PlyError> {
+    let bytes = std::fs::read(path).map_err(|source| PlyError::Io {
         path: path.display().to_string(),
-        reason: source.to_string(),
+        source,
     })?;
     parse(&bytes)
 }
 
 /// Parses a whole PLY file held in memory.
-pub fn parse(bytes: &[u8]) -> Result<PlyCloud, Error> {
+pub fn parse(bytes: &[u8]) -> Result<PlyCloud, PlyError> {
     let (header, body) = parse_header(bytes)?;
     match header.format {
         Format::Ascii => read_ascii(&header, body),
@@ -47,7 +83,12 @@ pub fn parse(bytes: &[u8]) -> Result<PlyCloud, Error> {
 
 /// Writes `cloud` as a binary little-endian PLY (float x, y, z and, with classes, uchar class).
 pub fn write_binary(cloud: &PlyCloud) -> Vec<u8> {
-    let mut out = header_text(cloud, "binary_little_endian").into_bytes();
+    write_binary_with_comment(cloud, None)
+}
+
+/// [`write_binary`] with an optional `comment` line in the header.
+pub(crate) fn write_binary_with_comment(cloud: &PlyCloud, comment: Option<&str>) -> Vec<u8> {
+    let mut out = header_text(cloud, "binary_little_endian", comment).into_bytes();
     for (i, p) in cloud.points.iter().enumerate() {
         for c in p {
             out.extend_from_slice(&c.to_le_bytes());
@@ -61,7 +102,7 @@ pub fn write_binary(cloud: &PlyCloud) -> Vec<u8> {
 
 /// Writes `cloud` as an ascii PLY.
 pub fn write_ascii(cloud: &PlyCloud) -> Vec<u8> {
-    let mut out = header_text(cloud, "ascii");
+    let mut out = header_text(cloud, "ascii", None);
     for (i, p) in cloud.points.iter().enumerate() {
         out.push_str(&format!("{} {} {}", p[0], p[1], p[2]));
         if let Some(classes) = &cloud.classes {
@@ -72,11 +113,15 @@ pub fn write_ascii(cloud: &PlyCloud) -> Vec<u8> {
     out.into_bytes()
 }
 
-fn header_text(cloud: &PlyCloud, format: &str) -> String {
-    let mut h = format!(
-        "ply\nformat {format} 1.0\nelement vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
+fn header_text(cloud: &PlyCloud, format: &str, comment: Option<&str>) -> String {
+    let mut h = format!("ply\nformat {format} 1.0\n");
+    if let Some(comment) = comment {
+        h.push_str(&format!("comment {comment}\n"));
+    }
+    h.push_str(&format!(
+        "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n",
         cloud.points.len()
-    );
+    ));
     if cloud.classes.is_some() {
         h.push_str("property uchar class\n");
     }
@@ -179,14 +224,14 @@ struct VertexLayout {
 /// Largest element count accepted, so a corrupt header cannot ask for absurd allocations.
 const MAX_COUNT: usize = 1 << 31;
 
-fn header_error(line: usize, reason: impl Into<String>) -> Error {
-    Error::PlyHeader {
+fn header_error(line: usize, reason: impl Into<String>) -> PlyError {
+    PlyError::Header {
         line,
         reason: reason.into(),
     }
 }
 
-fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
+fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), PlyError> {
     let mut pos = 0;
     let mut line_no = 0;
     let mut format = None;
@@ -348,7 +393,7 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), Error> {
     Ok((Header { format, elements }, &bytes[pos..]))
 }
 
-fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), Error> {
+fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), PlyError> {
     let index = header
         .elements
         .iter()
@@ -358,12 +403,12 @@ fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), Error> {
     let find = |name: &str| element.properties.iter().position(|p| p.name == name);
     let mut xyz = [0; 3];
     for (slot, axis) in xyz.iter_mut().zip(["x", "y", "z"]) {
-        let i = find(axis).ok_or_else(|| Error::PlyMissingProperty {
+        let i = find(axis).ok_or_else(|| PlyError::MissingProperty {
             element: element.name.clone(),
             property: axis.to_owned(),
         })?;
         if !matches!(element.properties[i].kind, PropertyKind::Scalar(_)) {
-            return Err(Error::PlyUnsupportedProperty {
+            return Err(PlyError::UnsupportedProperty {
                 element: element.name.clone(),
                 property: axis.to_owned(),
                 reason: "a coordinate must be a scalar, not a list".to_owned(),
@@ -376,7 +421,7 @@ fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), Error> {
         match element.properties[i].kind {
             PropertyKind::Scalar(t) if t.is_integer() => {}
             _ => {
-                return Err(Error::PlyUnsupportedProperty {
+                return Err(PlyError::UnsupportedProperty {
                     element: element.name.clone(),
                     property: element.properties[i].name.clone(),
                     reason: "a class must be an integer scalar (uchar, int, ...)".to_owned(),
@@ -387,8 +432,13 @@ fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), Error> {
     Ok((index, VertexLayout { xyz, class }))
 }
 
-fn data_error(element: &Element, index: usize, property: &str, reason: impl Into<String>) -> Error {
-    Error::PlyData {
+fn data_error(
+    element: &Element,
+    index: usize,
+    property: &str,
+    reason: impl Into<String>,
+) -> PlyError {
+    PlyError::Data {
         element: element.name.clone(),
         index,
         property: property.to_owned(),
@@ -403,7 +453,7 @@ fn push_vertex(
     layout: &VertexLayout,
     values: &[f64],
     out: &mut PlyCloud,
-) -> Result<(), Error> {
+) -> Result<(), PlyError> {
     let mut p = [0f32; 3];
     for (k, &i) in layout.xyz.iter().enumerate() {
         let v = values[i];
@@ -440,9 +490,9 @@ fn empty_cloud(count: usize, layout: &VertexLayout) -> PlyCloud {
     }
 }
 
-fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
+fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
     let (vertex_index, layout) = vertex_layout(header)?;
-    let text = std::str::from_utf8(body).map_err(|e| Error::PlyData {
+    let text = std::str::from_utf8(body).map_err(|e| PlyError::Data {
         element: "body".to_owned(),
         index: 0,
         property: String::new(),
@@ -465,7 +515,7 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
             let mut words = line.split_whitespace();
             values.clear();
             for property in &element.properties {
-                let mut next = |t: Scalar| -> Result<f64, Error> {
+                let mut next = |t: Scalar| -> Result<f64, PlyError> {
                     let word = words.next().ok_or_else(|| {
                         data_error(element, index, &property.name, "the row has too few values")
                     })?;
@@ -526,7 +576,7 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
     Ok(cloud)
 }
 
-fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
+fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
     let (vertex_index, layout) = vertex_layout(header)?;
     let vertex_element = &header.elements[vertex_index];
     let mut cloud = empty_cloud(vertex_element.count, &layout);
@@ -536,7 +586,7 @@ fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, Error> {
         for index in 0..element.count {
             values.clear();
             for property in &element.properties {
-                let mut take = |t: Scalar| -> Result<f64, Error> {
+                let mut take = |t: Scalar| -> Result<f64, PlyError> {
                     let size = t.size();
                     let bytes = body.get(pos..pos + size).ok_or_else(|| {
                         data_error(
