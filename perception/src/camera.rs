@@ -100,17 +100,22 @@ pub fn classify_points(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
     use super::*;
 
-    /// A camera 10 m up looking straight down: camera z = world -z, camera x = world x,
-    /// camera y = world -y.
+    /// A camera 10 m up looking straight down.
     fn nadir_camera() -> CameraModel {
+        nadir_camera_at(10.0)
+    }
+
+    /// A camera `height` m up looking straight down, 100×80 pixels, f = 100 px: camera z =
+    /// world -z, camera x = world x, camera y = world -y.
+    pub(crate) fn nadir_camera_at(height: f64) -> CameraModel {
         let rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
         CameraModel {
-            pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, 10.0), rotation),
+            pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, height), rotation),
             fx: 100.0,
             fy: 100.0,
             cx: 50.0,

@@ -115,27 +115,12 @@ impl ObstacleRays {
 
 #[cfg(test)]
 mod tests {
-    use nalgebra::{Isometry3, Translation3, UnitQuaternion};
-
     use super::*;
-
-    /// 20 m above the origin looking straight down, 100×80 pixels, f = 100 px.
-    fn nadir_camera() -> CameraModel {
-        let rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
-        CameraModel {
-            pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, 20.0), rotation),
-            fx: 100.0,
-            fy: 100.0,
-            cx: 50.0,
-            cy: 40.0,
-            width: 100,
-            height: 80,
-        }
-    }
+    use crate::camera::tests::nadir_camera_at;
 
     #[test]
     fn obstacle_pixels_land_where_the_camera_sees_them() {
-        let camera = nadir_camera();
+        let camera = nadir_camera_at(20.0);
         // A 100×80 mask: one obstacle pixel (class 7) at mask (61, 21), in the 2×2 block
         // (60..62, 20..22) centred on image (61, 21).
         let mut data = vec![4u8; 100 * 80];
