@@ -50,14 +50,12 @@ fn frames() -> Vec<(&'static str, v1::Frame, v1::SegmentationMode)> {
     frames
 }
 
-/// The shipped model and the ONNX Runtime library, when both are installed.
+/// The shipped model and the ONNX Runtime library, when both are installed (found as the
+/// server finds them).
 fn model_files() -> Option<(std::path::PathBuf, std::path::PathBuf)> {
-    let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..");
-    let model = root.join("models/rooftop-segmentation.onnx");
-    let ort = std::env::var_os("ORT_DYLIB_PATH")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| root.join(".ort/libonnxruntime.so"));
-    (model.is_file() && ort.is_file()).then_some((model, ort))
+    let model = landing_perception::workspace_root().join(landing_perception::DEFAULT_MODEL_PATH);
+    let ort = landing_perception::resolve_ort_library(None).ok()?;
+    model.is_file().then_some((model, ort))
 }
 
 fn options(mode: v1::SegmentationMode) -> v1::PipelineOptions {
