@@ -150,7 +150,7 @@ fn pairs(
     }
     let start = Instant::now();
     while start.elapsed() < budget || a.len() < 20 {
-        let local_first = rng.next() % 2 == 0;
+        let local_first = rng.next().is_multiple_of(2);
         let mut time_local = || {
             let t = Instant::now();
             local();
