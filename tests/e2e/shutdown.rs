@@ -125,16 +125,39 @@ fn server_process() {
     }
 }
 
+/// Reads the server process's JSON log until its "serving landing.v1" line and returns the
+/// address it names; the rest of the log goes on to this process's stderr.
+async fn serving_address(log: std::process::ChildStderr) -> Option<String> {
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead as _;
+        let mut tx = Some(tx);
+        for line in std::io::BufReader::new(log).lines() {
+            let Ok(line) = line else { break };
+            eprintln!("{line}");
+            let Ok(entry) = serde_json::from_str::<serde_json::Value>(&line) else {
+                continue;
+            };
+            let fields = &entry["fields"];
+            if fields["message"] == "serving landing.v1"
+                && let (Some(addr), Some(tx)) = (fields["addr"].as_str(), tx.take())
+            {
+                let _ = tx.send(addr.to_string());
+            }
+        }
+    });
+    rx.await.ok()
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sigterm_drains_a_stream() {
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .expect("bind")
-        .local_addr()
-        .expect("addr")
-        .port();
+    // The child binds port 0 and logs the address it got: no port is picked here and freed for
+    // another test's server to take.
     let mut config = server_config();
-    config.server.listen = format!("127.0.0.1:{port}");
-    let path = scratch().join(format!("server-{port}.toml"));
+    config.server.listen = "127.0.0.1:0".into();
+    config.log.format = "json".into();
+    config.log.filter = "info".into();
+    let path = scratch().join(format!("server-{}.toml", std::process::id()));
     std::fs::write(&path, config.to_toml()).expect("write the config");
     let mut child = std::process::Command::new(std::env::current_exe().expect("test binary"))
         .args([
@@ -144,10 +167,16 @@ async fn sigterm_drains_a_stream() {
             "--test-threads=1",
         ])
         .env("LANDING_E2E_SERVER_CONFIG", &path)
+        .env_remove("RUST_LOG")
+        .stderr(std::process::Stdio::piped())
         .spawn()
         .expect("start the server process");
-
-    let url = format!("http://127.0.0.1:{port}");
+    let addr = serving_address(child.stderr.take().expect("piped stderr"));
+    let addr = tokio::time::timeout(Duration::from_secs(60), addr)
+        .await
+        .expect("the server process serves within a minute")
+        .expect("the server process logs its address");
+    let url = format!("http://{addr}");
     let mut client = None;
     for _ in 0..600 {
         if let Ok(c) = LandingClient::connect(ClientConfig::new(url.clone())).await
@@ -158,7 +187,7 @@ async fn sigterm_drains_a_stream() {
         }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
-    let client = client.expect("the server process serves within a minute");
+    let client = client.expect("the server process answers health within a minute");
     let pid = child.id().to_string();
     let (items, end) = stream_and_stop(&client, many_frames(60), || {
         let ok = std::process::Command::new("kill")
