@@ -80,6 +80,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "intra_threads": int,
         "sessions": int,
         "ort_library": str,
+        "input_sizes": str,
     },
     "auth": {"tokens_file": str},
     "tls": {"cert_path": str, "key_path": str, "client_ca_path": str},

@@ -217,9 +217,11 @@ impl LandingClient {
         let mut attempt = 0u32;
         loop {
             attempt += 1;
+            let sent = Instant::now();
             match call(self.landing.clone(), self.config.request_timeout).await {
                 Ok(r) => return Ok(r.into_inner()),
                 Err(status) => {
+                    let status = own_deadline(status, self.config.request_timeout, sent.elapsed());
                     let error = FrameError::from_status(&status);
                     if !RetryPolicy::is_retryable(error.code) {
                         return Err(self.status_error(&status));
@@ -562,5 +564,49 @@ impl Stream for ResultStream {
                 }
             }
         }
+    }
+}
+
+/// tonic's own `grpc-timeout` timer answers CANCELLED ("Timeout expired") when it fires before
+/// the service's DEADLINE_EXCEEDED arrives; for the caller both mean that the deadline passed,
+/// which gRPC calls DEADLINE_EXCEEDED.
+fn own_deadline(
+    status: tonic::Status,
+    timeout: Option<Duration>,
+    elapsed: Duration,
+) -> tonic::Status {
+    match timeout {
+        Some(timeout) if status.code() == tonic::Code::Cancelled && elapsed >= timeout => {
+            tonic::Status::deadline_exceeded(format!(
+                "no answer within the request timeout of {timeout:?} ({})",
+                status.message()
+            ))
+        }
+        _ => status,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_cancel_by_the_clients_own_timer_is_deadline_exceeded() {
+        let timeout = Some(Duration::from_millis(150));
+        let timer = || tonic::Status::cancelled("Timeout expired");
+        let late = own_deadline(timer(), timeout, Duration::from_millis(151));
+        assert_eq!(late.code(), tonic::Code::DeadlineExceeded);
+        assert!(late.message().contains("150ms"), "{}", late.message());
+        // Cancelled early (the caller or the server went away), or without a timeout: as is.
+        let early = own_deadline(timer(), timeout, Duration::from_millis(20));
+        assert_eq!(early.code(), tonic::Code::Cancelled);
+        let untimed = own_deadline(timer(), None, Duration::from_secs(9));
+        assert_eq!(untimed.code(), tonic::Code::Cancelled);
+        let other = own_deadline(
+            tonic::Status::internal("x"),
+            timeout,
+            Duration::from_secs(1),
+        );
+        assert_eq!(other.code(), tonic::Code::Internal);
     }
 }

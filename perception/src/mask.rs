@@ -90,6 +90,48 @@ impl ClassMask {
             .unwrap_or(0)
     }
 
+    /// Fuses masks of one image taken at several model input sizes, conservatively for landing:
+    /// at the resolution of the first mask, a pixel keeps the first mask's class where every
+    /// mask calls it landable (or unknown), and takes the first obstacle class any mask gives it
+    /// otherwise (each mask sampled at the pixel's centre, stretched over the same image). A
+    /// small obstacle that one scale misses and another sees stays an obstacle. Put the finest
+    /// mask first: coarser ones are sampled at its pixel centres, finer ones would be skipped
+    /// over. `None` when `masks` is empty.
+    pub fn fuse_keeping_obstacles(
+        masks: &[ClassMask],
+        is_landable: impl Fn(u8) -> bool,
+    ) -> Option<ClassMask> {
+        let (first, others) = masks.split_first()?;
+        let (w, h) = (first.width, first.height);
+        let mut data = first.data.clone();
+        for other in others {
+            // Column and row of `other` under each pixel centre of `first`.
+            let column = |x: u32| {
+                let c = (f64::from(x) + 0.5) * f64::from(other.width) / f64::from(w);
+                (c as u32).min(other.width - 1) as usize
+            };
+            let columns: Vec<usize> = (0..w).map(column).collect();
+            for y in 0..h {
+                let oy = (((f64::from(y) + 0.5) * f64::from(other.height) / f64::from(h)) as u32)
+                    .min(other.height - 1) as usize;
+                let row = &other.data[oy * other.width as usize..][..other.width as usize];
+                let out = &mut data[y as usize * w as usize..][..w as usize];
+                for (pixel, &ox) in out.iter_mut().zip(&columns) {
+                    let seen = row[ox];
+                    let obstacle = |c: u8| c != 0 && !is_landable(c);
+                    if !obstacle(*pixel) && obstacle(seen) {
+                        *pixel = seen;
+                    }
+                }
+            }
+        }
+        Some(ClassMask {
+            width: w,
+            height: h,
+            data,
+        })
+    }
+
     /// This mask resampled to `width × height` by nearest neighbour (pixel centres).
     pub fn resized_nearest(&self, width: u32, height: u32) -> Result<Self, PerceptionError> {
         if width == 0 || height == 0 {
@@ -271,5 +313,28 @@ mod tests {
         assert_eq!(big.get(2, 1), Some(2));
         assert_eq!(big.get(3, 3), Some(4));
         assert_eq!(big.resized_nearest(2, 2).unwrap(), m);
+    }
+
+    #[test]
+    fn fusion_keeps_every_obstacle_and_the_first_masks_resolution() {
+        // 4×2 at full size: rooftop (4) with a vent (7) the coarse mask misses.
+        let fine = ClassMask::new(4, 2, vec![4, 4, 7, 4, 4, 4, 4, 4]).unwrap();
+        // 2×1 coarse: a tarp (13) on the left half, rooftop on the right.
+        let coarse = ClassMask::new(2, 1, vec![13, 4]).unwrap();
+        let landable = |c: u8| c == 4;
+        let fused =
+            ClassMask::fuse_keeping_obstacles(&[fine.clone(), coarse.clone()], landable).unwrap();
+        assert_eq!((fused.width(), fused.height()), (4, 2));
+        assert_eq!(fused.as_slice(), &[13, 13, 7, 4, 13, 13, 4, 4]);
+        // At the coarse mask's resolution the fine one is sampled at pixel centres: (1, 0) sees
+        // fine (3, 1), rooftop; the vent at fine (2, 0) falls between centres.
+        let fused = ClassMask::fuse_keeping_obstacles(&[coarse.clone(), fine], landable).unwrap();
+        assert_eq!(fused.as_slice(), &[13, 4]);
+        // One mask: itself. None: nothing.
+        assert_eq!(
+            ClassMask::fuse_keeping_obstacles(std::slice::from_ref(&coarse), landable),
+            Some(coarse)
+        );
+        assert_eq!(ClassMask::fuse_keeping_obstacles(&[], landable), None);
     }
 }

@@ -229,6 +229,17 @@ impl Segmenter {
     /// Segments one image: resize and normalise to the model input, run the model, and return the
     /// class mask at model resolution (`info().input_width × input_height`).
     pub fn segment(&self, image: &RgbImage) -> Result<ClassMask, PerceptionError> {
+        self.segment_at(image, self.info.input_width, self.info.input_height)
+    }
+
+    /// Like [`Segmenter::segment`] with the image resized to `width × height` for the model
+    /// (the graph takes any size; the mask comes out at that size).
+    pub fn segment_at(
+        &self,
+        image: &RgbImage,
+        width: u32,
+        height: u32,
+    ) -> Result<ClassMask, PerceptionError> {
         if image.width() == 0 || image.height() == 0 {
             return Err(PerceptionError::invalid_input(
                 "image.size",
@@ -236,9 +247,8 @@ impl Segmenter {
                 "must not be empty",
             ));
         }
-        let (w, h) = (self.info.input_width, self.info.input_height);
-        let input = preprocess(image, w, h);
-        self.run(&input, w, h)
+        let input = preprocess(image, width, height);
+        self.run(&input, width, height)
     }
 
     /// Runs the model on an already preprocessed NCHW float32 tensor of `3 * height * width`

@@ -91,6 +91,48 @@ pub struct SegmentationConfig {
     pub sessions: u32,
     /// "" = `ORT_DYLIB_PATH`, else `.ort/libonnxruntime.so`.
     pub ort_library: PathBuf,
+    /// Sizes the image is segmented at, `"WxH,WxH,…"`; a pixel is landable only where every
+    /// size says so (`landing_perception::ClassMask::fuse_keeping_obstacles`). "" = once, at the
+    /// size in the model's metadata. The default runs the shipped model (trained at 256 × 192) at
+    /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
+    /// sees rooftop-entrance tops best (EVALUATION.md).
+    pub input_sizes: String,
+}
+
+impl SegmentationConfig {
+    /// `input_sizes` parsed, finest first; empty for the model's own size.
+    pub fn parsed_input_sizes(&self) -> Result<Vec<(u32, u32)>, Error> {
+        const KEY: &str = "segmentation.input_sizes";
+        let mut sizes = Vec::new();
+        for entry in self
+            .input_sizes
+            .split(',')
+            .map(str::trim)
+            .filter(|e| !e.is_empty())
+        {
+            let size = entry
+                .split_once(['x', 'X'])
+                .and_then(|(w, h)| {
+                    Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?))
+                })
+                .ok_or_else(|| Error::config(KEY, format!("{entry:?} is not WIDTHxHEIGHT")))?;
+            if !(32..=4096).contains(&size.0) || !(32..=4096).contains(&size.1) {
+                return Err(Error::config(
+                    KEY,
+                    format!("{entry}: width and height must be in 32..=4096"),
+                ));
+            }
+            sizes.push(size);
+        }
+        if sizes.len() > 4 {
+            return Err(Error::config(
+                KEY,
+                format!("{} sizes; at most 4", sizes.len()),
+            ));
+        }
+        sizes.sort_by_key(|&(w, h)| std::cmp::Reverse(u64::from(w) * u64::from(h)));
+        Ok(sizes)
+    }
 }
 
 impl Default for SegmentationConfig {
@@ -102,6 +144,7 @@ impl Default for SegmentationConfig {
             intra_threads: 1,
             sessions: 1,
             ort_library: PathBuf::new(),
+            input_sizes: "320x240,256x192".into(),
         }
     }
 }
@@ -239,6 +282,7 @@ impl Config {
                 format!("{} is outside 1..=64", g.sessions),
             ));
         }
+        g.parsed_input_sizes()?;
         if g.enabled {
             require_file("segmentation.model_path", &g.model_path)?;
             if !g.ort_library.as_os_str().is_empty() {
@@ -565,6 +609,14 @@ mod tests {
             (
                 "[segmentation]\nmodel_path = \"/nonexistent/model.onnx\"\n",
                 "segmentation.model_path",
+            ),
+            (
+                "[segmentation]\ninput_sizes = \"320x8\"\n",
+                "segmentation.input_sizes",
+            ),
+            (
+                "[segmentation]\ninput_sizes = \"320\"\n",
+                "segmentation.input_sizes",
             ),
             (
                 "[auth]\ntokens_file = \"/nonexistent/tokens\"\n",

@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use landing_perception::{
-    CameraModel, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
+    CameraModel, ClassMask, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
     SegmenterConfig, classify_points, decode_image,
 };
 
@@ -29,6 +29,8 @@ pub struct Classified {
 pub struct Segmenter {
     sessions: Vec<landing_perception::Segmenter>,
     next: AtomicUsize,
+    /// The input sizes of every frame, finest first (the masks are fused).
+    sizes: Vec<(u32, u32)>,
 }
 
 impl Segmenter {
@@ -49,6 +51,7 @@ impl Segmenter {
                 .then(|| config.ort_library.clone()),
             input_size: None,
         };
+        let sizes = config.parsed_input_sizes()?;
         let sessions = (0..config.sessions.max(1))
             .map(|_| landing_perception::Segmenter::new(&perception))
             .collect::<Result<Vec<_>, _>>()
@@ -62,9 +65,17 @@ impl Segmenter {
                 "segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU"
             );
         }
+        // No sizes: the model's own.
+        let sizes = if sizes.is_empty() {
+            let i = sessions[0].info();
+            vec![(i.input_width, i.input_height)]
+        } else {
+            sizes
+        };
         Ok(Self {
             sessions,
             next: AtomicUsize::new(0),
+            sizes,
         })
     }
 
@@ -75,11 +86,11 @@ impl Segmenter {
     /// A short description for logs.
     pub fn describe(&self) -> String {
         let i = self.info();
+        let sizes: Vec<String> = self.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
         format!(
-            "{} ({}x{}, {}, {} session(s), sha256 {})",
+            "{} (at {}, {}, {} session(s), sha256 {})",
             i.name,
-            i.input_width,
-            i.input_height,
+            sizes.join(" + "),
             i.execution_provider,
             self.sessions.len(),
             i.sha256
@@ -89,17 +100,19 @@ impl Segmenter {
     /// The model as `GetServiceInfo` reports it.
     pub fn model_info(&self) -> landing_proto::v1::ModelInfo {
         let i = self.info();
+        let (input_width, input_height) = self.sizes[0];
         landing_proto::v1::ModelInfo {
             name: i.name.clone(),
             sha256: i.sha256.clone(),
-            input_width: i.input_width,
-            input_height: i.input_height,
+            input_width,
+            input_height,
             execution_provider: i.execution_provider.to_string(),
         }
     }
 
-    /// Segments the decoded `image`, gives each world point the class of its pixel, and collects
-    /// the rays of the pixels whose class is not in `landable`.
+    /// Segments the decoded `image` at every input size and fuses the masks (a pixel is landable
+    /// only where every size says so), gives each world point the class of its pixel, and
+    /// collects the rays of the pixels whose class is not in `landable`.
     pub fn classify(
         &self,
         camera: &CameraImage,
@@ -110,7 +123,14 @@ impl Segmenter {
         let t0 = Instant::now();
         let session =
             &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
-        let mask = session.segment(image).map_err(|e| perception_error(&e))?;
+        let masks = self
+            .sizes
+            .iter()
+            .map(|&(w, h)| session.segment_at(image, w, h))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| perception_error(&e))?;
+        let mask = ClassMask::fuse_keeping_obstacles(&masks, |c| landable.contains(&c))
+            .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
         let t1 = Instant::now();
         let k = camera.intrinsics;
         let model = CameraModel {
@@ -123,7 +143,9 @@ impl Segmenter {
             height: k.height,
         };
         let classes = classify_points(world_points, &model, &mask);
-        let obstacles = ObstacleRays::new(&model, &mask, |c| c != 0 && !landable.contains(&c));
+        let obstacles = ObstacleRays::new(&model, &mask, world_points, |c| {
+            c != 0 && !landable.contains(&c)
+        });
         Ok(Classified {
             classes,
             obstacles,
