@@ -13,8 +13,8 @@
 //! LiDAR: the highest point near the block in the image that the mask also calls an obstacle;
 //! where no such point is near (a vent between scan lines), an assumed low obstacle
 //! ([`DEFAULT_OBSTACLE_HEIGHT_M`]). A pixel that sees something below the plane (the street past
-//! an edge) lands in front of it with no sweep: it marks where the camera does not see landable
-//! roof at the plane's height, which is what matters.
+//! an edge, its LiDAR points below the plane too) lands in front of it with no sweep: it marks
+//! where the camera does not see landable roof at the plane's height, which is what matters.
 
 use nalgebra::{Point3, Vector3};
 
