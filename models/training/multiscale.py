@@ -30,12 +30,14 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 from PIL import Image
 
-NUM_CLASSES = 15
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from evaluate import iou_from_confusion, session  # noqa: E402
+from seg.models import NUM_CLASSES  # noqa: E402
+
 ROOFTOP = 4
 OBSTACLES = range(5, 14)  # entrance … tarp
 NAMES = {5: "entrance", 6: "skylight", 7: "vents", 8: "ac-unit", 9: "seating", 10: "ducts",
@@ -68,12 +70,12 @@ def fuse(masks: list[np.ndarray]) -> np.ndarray:
 
 
 def scores(confusion: np.ndarray) -> dict:
+    """evaluate.py's IoU and pixel accuracy, plus what landing depends on."""
     tp = np.diag(confusion).astype(float)
-    present = confusion.sum(1) > 0
-    iou = tp / np.maximum(confusion.sum(0) + confusion.sum(1) - tp, 1)
+    iou = iou_from_confusion(confusion)
     return {
-        "mean_iou": float(iou[present].mean()),
-        "pixel_accuracy": float(tp.sum() / confusion.sum()),
+        "mean_iou": iou["mean_iou"],
+        "pixel_accuracy": iou["pixel_accuracy"],
         "rooftop_precision": float(tp[ROOFTOP] / max(confusion[:, ROOFTOP].sum(), 1)),
         "rooftop_recall": float(tp[ROOFTOP] / max(confusion[ROOFTOP].sum(), 1)),
         "obstacle_not_rooftop": {
@@ -94,13 +96,11 @@ def main() -> int:
     args = ap.parse_args()
 
     sizes = [tuple(int(v) for v in s.lower().split("x")) for s in args.sizes.split(",")]
-    options = ort.SessionOptions()
-    options.intra_op_num_threads = args.threads
-    session = ort.InferenceSession(args.model, options, providers=["CPUExecutionProvider"])
-    meta = session.get_modelmeta().custom_metadata_map
+    model = session(args.model, args.threads)
+    meta = model.get_modelmeta().custom_metadata_map
     mean = np.array(json.loads(meta["mean"]), dtype=np.float32)
     std = np.array(json.loads(meta["std"]), dtype=np.float32)
-    input_name = session.get_inputs()[0].name
+    input_name = model.get_inputs()[0].name
 
     fused_names = [f"fused {'+'.join(f'{w}x{h}' for w, h in sizes[:k])}" for k in range(2, len(sizes) + 1)]
     names = [f"{w}x{h}" for w, h in sizes] + fused_names
@@ -116,7 +116,7 @@ def main() -> int:
             for w, h in sizes:
                 x = np.asarray(image.resize((w, h), Image.BILINEAR), dtype=np.float32) / 255.0
                 x = ((x - mean) / std).transpose(2, 0, 1)[None].astype(np.float32)
-                out = session.run(None, {input_name: x})[0].reshape(h, w).astype(np.uint8)
+                out = model.run(None, {input_name: x})[0].reshape(h, w).astype(np.uint8)
                 masks.append(np.array(Image.fromarray(out).resize(image.size, Image.NEAREST)))
             predictions = masks + [fuse(masks[:k]) for k in range(2, len(sizes) + 1)]
             known = labels > 0

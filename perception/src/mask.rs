@@ -91,15 +91,15 @@ impl ClassMask {
     }
 
     /// Fuses masks of one image taken at several model input sizes, conservatively for landing:
-    /// at the resolution of the first mask, a pixel keeps the first mask's class where every
-    /// mask calls it landable (or unknown), and takes the first obstacle class any mask gives it
+    /// at the resolution of the first mask, a pixel keeps the first mask's class where no mask
+    /// calls it an obstacle (`is_obstacle`), and takes the first obstacle class any mask gives it
     /// otherwise (each mask sampled at the pixel's centre, stretched over the same image). A
     /// small obstacle that one scale misses and another sees stays an obstacle. Put the finest
     /// mask first: coarser ones are sampled at its pixel centres, finer ones would be skipped
     /// over. `None` when `masks` is empty.
     pub fn fuse_keeping_obstacles(
         masks: &[ClassMask],
-        is_landable: impl Fn(u8) -> bool,
+        is_obstacle: impl Fn(u8) -> bool,
     ) -> Option<ClassMask> {
         let (first, others) = masks.split_first()?;
         let (w, h) = (first.width, first.height);
@@ -118,8 +118,7 @@ impl ClassMask {
                 let out = &mut data[y as usize * w as usize..][..w as usize];
                 for (pixel, &ox) in out.iter_mut().zip(&columns) {
                     let seen = row[ox];
-                    let obstacle = |c: u8| c != 0 && !is_landable(c);
-                    if !obstacle(*pixel) && obstacle(seen) {
+                    if !is_obstacle(*pixel) && is_obstacle(seen) {
                         *pixel = seen;
                     }
                 }
@@ -321,20 +320,20 @@ mod tests {
         let fine = ClassMask::new(4, 2, vec![4, 4, 7, 4, 4, 4, 4, 4]).unwrap();
         // 2×1 coarse: a tarp (13) on the left half, rooftop on the right.
         let coarse = ClassMask::new(2, 1, vec![13, 4]).unwrap();
-        let landable = |c: u8| c == 4;
+        let obstacle = |c: u8| c != 0 && c != 4;
         let fused =
-            ClassMask::fuse_keeping_obstacles(&[fine.clone(), coarse.clone()], landable).unwrap();
+            ClassMask::fuse_keeping_obstacles(&[fine.clone(), coarse.clone()], obstacle).unwrap();
         assert_eq!((fused.width(), fused.height()), (4, 2));
         assert_eq!(fused.as_slice(), &[13, 13, 7, 4, 13, 13, 4, 4]);
         // At the coarse mask's resolution the fine one is sampled at pixel centres: (1, 0) sees
         // fine (3, 1), rooftop; the vent at fine (2, 0) falls between centres.
-        let fused = ClassMask::fuse_keeping_obstacles(&[coarse.clone(), fine], landable).unwrap();
+        let fused = ClassMask::fuse_keeping_obstacles(&[coarse.clone(), fine], obstacle).unwrap();
         assert_eq!(fused.as_slice(), &[13, 4]);
         // One mask: itself. None: nothing.
         assert_eq!(
-            ClassMask::fuse_keeping_obstacles(std::slice::from_ref(&coarse), landable),
+            ClassMask::fuse_keeping_obstacles(std::slice::from_ref(&coarse), obstacle),
             Some(coarse)
         );
-        assert_eq!(ClassMask::fuse_keeping_obstacles(&[], landable), None);
+        assert_eq!(ClassMask::fuse_keeping_obstacles(&[], obstacle), None);
     }
 }

@@ -30,6 +30,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
+use landing_client::eval::stats::{self, SplitMix64};
 use landing_geometry::synthetic::{Scene, SceneParams};
 use landing_proto::v1;
 use landing_proto::v1::landing_service_client::LandingServiceClient;
@@ -97,48 +98,22 @@ fn options(mode: v1::SegmentationMode) -> v1::PipelineOptions {
     }
 }
 
-/// A small deterministic generator for the pair order and the bootstrap.
-struct XorShift(u64);
-
-impl XorShift {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-}
-
+/// The median of `values` (not empty).
 fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        (v[n / 2 - 1] + v[n / 2]) / 2.0
-    }
+    stats::median(values).expect("measurements")
 }
 
 /// The median of `ratios` and a percentile-bootstrap 95 % interval of it.
-fn median_with_interval(ratios: &[f64], rng: &mut XorShift) -> (f64, f64, f64) {
-    let mut medians: Vec<f64> = (0..2000)
-        .map(|_| {
-            let sample: Vec<f64> = (0..ratios.len())
-                .map(|_| ratios[(rng.next() % ratios.len() as u64) as usize])
-                .collect();
-            median(&sample)
-        })
-        .collect();
-    medians.sort_by(f64::total_cmp);
-    (median(ratios), medians[50], medians[1949])
+fn median_with_interval(ratios: &[f64], seed: u64) -> (f64, f64, f64) {
+    let (lo, hi) = stats::bootstrap_ci95(ratios, 2000, seed, median).expect("measurements");
+    (median(ratios), lo, hi)
 }
 
 /// Interleaved pairs of (in process, service) wall times in seconds, plus what the second
 /// closure reports on the side (the unary gap), for `budget` or at least 20 pairs.
 fn pairs(
     budget: Duration,
-    rng: &mut XorShift,
+    rng: &mut SplitMix64,
     mut local: impl FnMut(),
     mut remote: impl FnMut() -> f64,
 ) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
@@ -150,7 +125,7 @@ fn pairs(
     }
     let start = Instant::now();
     while start.elapsed() < budget || a.len() < 20 {
-        let local_first = rng.next().is_multiple_of(2);
+        let local_first = rng.next_u64().is_multiple_of(2);
         let mut time_local = || {
             let t = Instant::now();
             local();
@@ -223,7 +198,7 @@ fn main() {
             .expect("load the model");
         pipeline.segmenter = Some(std::sync::Arc::new(segmenter));
     }
-    let mut rng = XorShift(0x9E37_79B9_7F4A_7C15);
+    let mut rng = SplitMix64(2026);
 
     println!(
         "| frame | in process | unary | unary overhead (95 % CI) | gap | stream, per frame | \
@@ -294,8 +269,8 @@ fn main() {
         let ratios = |x: &[f64], y: &[f64]| -> Vec<f64> {
             x.iter().zip(y).map(|(x, y)| y / x - 1.0).collect()
         };
-        let (u, u_lo, u_hi) = median_with_interval(&ratios(&a, &b), &mut rng);
-        let (s, s_lo, s_hi) = median_with_interval(&ratios(&c, &d), &mut rng);
+        let (u, u_lo, u_hi) = median_with_interval(&ratios(&a, &b), 1);
+        let (s, s_lo, s_hi) = median_with_interval(&ratios(&c, &d), 2);
         let ms = |v: &[f64]| median(v) * 1e3;
         let per_frame = |v: &[f64]| median(v) * 1e3 / STREAM_FRAMES as f64;
         let pct = |x: f64| format!("{:+.1} %", x * 100.0);

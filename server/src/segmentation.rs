@@ -129,7 +129,9 @@ impl Segmenter {
             .map(|&(w, h)| session.segment_at(image, w, h))
             .collect::<Result<Vec<_>, _>>()
             .map_err(|e| perception_error(&e))?;
-        let mask = ClassMask::fuse_keeping_obstacles(&masks, |c| landable.contains(&c))
+        // Unknown (0) is no obstacle: the points there get no class and the pixels no disk.
+        let is_obstacle = |c: u8| c != 0 && !landable.contains(&c);
+        let mask = ClassMask::fuse_keeping_obstacles(&masks, is_obstacle)
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
         let t1 = Instant::now();
         let k = camera.intrinsics;
@@ -143,9 +145,7 @@ impl Segmenter {
             height: k.height,
         };
         let classes = classify_points(world_points, &model, &mask);
-        let obstacles = ObstacleRays::new(&model, &mask, world_points, |c| {
-            c != 0 && !landable.contains(&c)
-        });
+        let obstacles = ObstacleRays::new(&model, &mask, world_points, is_obstacle);
         Ok(Classified {
             classes,
             obstacles,
