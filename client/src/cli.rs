@@ -146,6 +146,9 @@ pub enum Segmentation {
     Auto,
     /// The server's segmentation model.
     Model,
+    /// The recording's label images (`/camera/labels`, the simulator's ground truth) sent as
+    /// each frame's class image, as a drone with its own segmentation would.
+    ClassImage,
     /// The classes carried by the point cloud (ground truth in recordings).
     PointClasses,
     /// Geometry only.
@@ -164,6 +167,7 @@ impl PipelineArgs {
             segmentation_mode: match self.segmentation {
                 Segmentation::Auto => SegmentationMode::Unspecified,
                 Segmentation::Model => SegmentationMode::Model,
+                Segmentation::ClassImage => SegmentationMode::ClassImage,
                 Segmentation::PointClasses => SegmentationMode::PointClasses,
                 Segmentation::None => SegmentationMode::None,
             } as i32,
@@ -402,7 +406,27 @@ fn io(e: std::io::Error) -> CliError {
     }
 }
 
-fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
+/// The frames of a recording as the flags send them: with `--segmentation class-image`, each
+/// frame carries its recorded label image as its class image.
+fn recorded_frames(path: &Path, pipeline: &PipelineArgs) -> Result<Vec<RecordedFrame>, CliError> {
+    let mut frames = read_frames(path)?;
+    if pipeline.segmentation == Segmentation::ClassImage {
+        for f in &mut frames {
+            let labels = f.labels.take().ok_or_else(|| {
+                usage(format!(
+                    "--segmentation class-image: frame {} of {} has no label image on `{}`",
+                    f.frame.sequence,
+                    path.display(),
+                    crate::recording::LABELS_TOPIC
+                ))
+            })?;
+            f.frame.class_image = Some(labels);
+        }
+    }
+    Ok(frames)
+}
+
+fn load_frame(path: &Path, index: usize, pipeline: &PipelineArgs) -> Result<Frame, CliError> {
     let is_ply = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
@@ -422,7 +446,7 @@ fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
             .drone_id("landing-cli")
             .build());
     }
-    let frames = read_frames(path)?;
+    let frames = recorded_frames(path, pipeline)?;
     let n = frames.len();
     frames
         .into_iter()
@@ -436,7 +460,7 @@ fn load_frame(path: &Path, index: usize) -> Result<Frame, CliError> {
 }
 
 async fn detect(cli: &Cli, a: &DetectArgs, out: &mut (dyn Write + Send)) -> Result<u8, CliError> {
-    let frame = load_frame(&a.input, a.frame)?;
+    let frame = load_frame(&a.input, a.frame, &a.pipeline)?;
     let client = connect(&cli.connection).await?;
     let result = client
         .detect_with(frame, Some(a.pipeline.options()))
@@ -460,7 +484,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
     {
         return Err(usage(format!("--rate {r} must be positive")));
     }
-    let mut frames = read_frames(&a.recording)?;
+    let mut frames = recorded_frames(&a.recording, &a.pipeline)?;
     if let Some(l) = a.limit {
         frames.truncate(l);
     }
@@ -605,7 +629,11 @@ async fn loadtest(
     }
     let mut frames = Vec::new();
     for r in &a.recordings {
-        frames.extend(read_frames(r)?.into_iter().map(|f| f.frame));
+        frames.extend(
+            recorded_frames(r, &a.pipeline)?
+                .into_iter()
+                .map(|f| f.frame),
+        );
     }
     let client = connect(&cli.connection).await?;
     let config = LoadTestConfig {
@@ -655,7 +683,7 @@ async fn render_cmd(
     a: &RenderArgs,
     out: &mut (dyn Write + Send),
 ) -> Result<u8, CliError> {
-    let frame = load_frame(&a.recording, a.frame)?;
+    let frame = load_frame(&a.recording, a.frame, &a.pipeline)?;
     let client = connect(&cli.connection).await?;
     let result = client
         .detect_with(frame.clone(), Some(a.pipeline.options()))
@@ -770,6 +798,7 @@ fn options_pairs(o: &PipelineOptions) -> Vec<(&'static str, String)> {
 fn segmentation_name(mode: i32) -> &'static str {
     match SegmentationMode::try_from(mode) {
         Ok(SegmentationMode::Model) => "model",
+        Ok(SegmentationMode::ClassImage) => "class_image",
         Ok(SegmentationMode::PointClasses) => "point_classes",
         Ok(SegmentationMode::None) => "none",
         _ => "unspecified",

@@ -274,6 +274,13 @@ pub enum ImageData {
         height: u32,
         data: Vec<u8>,
     },
+    /// Raw 8-bit single channel, row-major, tightly packed: a class image (one
+    /// `SemanticClass` number per pixel) for [`FrameBuilder::class_image`].
+    Mono8 {
+        width: u32,
+        height: u32,
+        data: Vec<u8>,
+    },
 }
 
 /// Ties pixels to the camera's pose and intrinsics. The image size is checked against the
@@ -302,28 +309,12 @@ pub fn camera_image(
             width,
             height,
             data,
-        } => {
-            let expected = width as usize * height as usize * 3;
-            if data.len() != expected {
-                return Err(ClientError::InvalidInput {
-                    field: "image.data",
-                    reason: format!(
-                        "{} bytes for a {width}x{height} RGB8 image (expected {expected})",
-                        data.len()
-                    ),
-                });
-            }
-            (
-                (width, height),
-                camera_image::Image::Raw(RawImage {
-                    width,
-                    height,
-                    encoding: "rgb8".into(),
-                    step: width * 3,
-                    data,
-                }),
-            )
-        }
+        } => raw(width, height, "rgb8", 3, data)?,
+        ImageData::Mono8 {
+            width,
+            height,
+            data,
+        } => raw(width, height, "mono8", 1, data)?,
     };
     if size != (calibration.width, calibration.height) {
         return Err(ClientError::InvalidInput {
@@ -341,6 +332,36 @@ pub fn camera_image(
         calibration: Some(calibration),
         image: Some(image),
     })
+}
+
+/// Raw pixels, tightly packed, checked against their size.
+fn raw(
+    width: u32,
+    height: u32,
+    encoding: &str,
+    channels: u32,
+    data: Vec<u8>,
+) -> Result<((u32, u32), camera_image::Image), ClientError> {
+    let expected = width as usize * height as usize * channels as usize;
+    if data.len() != expected {
+        return Err(ClientError::InvalidInput {
+            field: "image.data",
+            reason: format!(
+                "{} bytes for a {width}x{height} {encoding} image (expected {expected})",
+                data.len()
+            ),
+        });
+    }
+    Ok((
+        (width, height),
+        camera_image::Image::Raw(RawImage {
+            width,
+            height,
+            encoding: encoding.into(),
+            step: width * channels,
+            data,
+        }),
+    ))
 }
 
 fn probe_size(data: &[u8], format: image::ImageFormat) -> Result<(u32, u32), ClientError> {
@@ -379,6 +400,15 @@ impl FrameBuilder {
     /// The camera image used to classify the points.
     pub fn image(mut self, image: CameraImage) -> Self {
         self.frame.image = Some(image);
+        self
+    }
+
+    /// Per-pixel classes of a camera (for example the drone's own segmentation: an 8-bit
+    /// grayscale PNG or [`ImageData::Mono8`], pixel value = `SemanticClass` number), used instead
+    /// of the server's model (`SEGMENTATION_MODE_CLASS_IMAGE`, which `UNSPECIFIED` picks when a
+    /// frame has one).
+    pub fn class_image(mut self, classes: CameraImage) -> Self {
+        self.frame.class_image = Some(classes);
         self
     }
 

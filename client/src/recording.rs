@@ -1,7 +1,9 @@
 //! Reading frames from MCAP recordings and writing stream results as MCAP.
 //!
 //! A recording holds `landing.v1.Frame` messages (protobuf encoding, the schema named by the
-//! fully-qualified message name) on one or more topics, next to ground truth the client ignores.
+//! fully-qualified message name) on one or more topics, next to ground truth the client ignores
+//! and, in the simulator's recordings, the true label image of each frame (`/camera/labels`,
+//! same log time), which `--segmentation class-image` sends as the frame's class image.
 //! Results are written as `landing.v1.StreamLandingSitesResponse` messages with the log time of
 //! the frame they answer, so both files line up when opened together in Foxglove.
 
@@ -9,7 +11,8 @@ use std::collections::BTreeMap;
 use std::io::{BufWriter, Seek, Write};
 use std::path::Path;
 
-use landing_proto::v1::{Frame, StreamLandingSitesResponse};
+use landing_proto::v1::{CameraImage, Frame, StreamLandingSitesResponse};
+pub use landing_sim::recording::LABELS_TOPIC;
 use prost::Message;
 
 use crate::ClientError;
@@ -30,6 +33,8 @@ pub struct RecordedFrame {
     pub log_time_ns: u64,
     /// The frame.
     pub frame: Frame,
+    /// The label image recorded with it on [`LABELS_TOPIC`], if any.
+    pub labels: Option<CameraImage>,
 }
 
 /// Reads every `landing.v1.Frame` of the recording, in file order.
@@ -44,9 +49,16 @@ pub fn read_frames(path: &Path) -> Result<Vec<RecordedFrame>, ClientError> {
 /// Parses the frames of an MCAP file held in memory.
 pub fn frames_from_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, String> {
     let mut frames = Vec::new();
+    let mut labels = BTreeMap::new();
     let stream = mcap::MessageStream::new(bytes).map_err(|e| e.to_string())?;
     for message in stream {
         let message = message.map_err(|e| e.to_string())?;
+        if message.channel.topic == LABELS_TOPIC {
+            let image = CameraImage::decode(&message.data[..])
+                .map_err(|e| format!("message {} on `{LABELS_TOPIC}`: {e}", message.sequence))?;
+            labels.insert(message.log_time, image);
+            continue;
+        }
         let is_frame = message
             .channel
             .schema
@@ -65,10 +77,14 @@ pub fn frames_from_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, String> {
             topic: message.channel.topic.clone(),
             log_time_ns: message.log_time,
             frame,
+            labels: None,
         });
     }
     if frames.is_empty() {
         return Err(format!("no `{FRAME_SCHEMA}` messages (protobuf) found"));
+    }
+    for f in &mut frames {
+        f.labels = labels.remove(&f.log_time_ns);
     }
     Ok(frames)
 }
@@ -202,6 +218,24 @@ mod tests {
         assert_eq!(read[2].frame, frames[2]);
         assert_eq!(read[1].log_time_ns, 100_000_000);
         assert_eq!(read[0].topic, "/drone/frame");
+    }
+
+    #[test]
+    fn the_simulators_label_images_come_with_their_frames() {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples/rooftops.mcap");
+        let read = read_frames(&path).unwrap();
+        assert!(!read.is_empty());
+        for r in &read {
+            let labels = r.labels.as_ref().expect("every simulated frame has labels");
+            let image = r.frame.image.as_ref().unwrap();
+            // Same camera, same moment: the labels are the image's.
+            assert_eq!(labels.calibration, image.calibration);
+            assert_eq!(labels.pose, image.pose);
+            assert_eq!(labels.timestamp, r.frame.timestamp);
+        }
+        // A recording without them reads as before.
+        let bare = frames_from_bytes(&recording(&[Frame::default()])).unwrap();
+        assert_eq!(bare[0].labels, None);
     }
 
     #[test]

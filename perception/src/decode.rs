@@ -1,10 +1,13 @@
-//! Image decoding (PNG, JPEG, raw RGB8) and the model's preprocessing (resize and normalise).
+//! Image decoding (PNG, JPEG, raw RGB8; class images from 8-bit grayscale PNG or raw mono8) and
+//! the model's preprocessing (resize and normalise).
 
 use std::io::Cursor;
 
-use image::{ImageFormat, ImageReader, Limits, RgbImage, imageops::FilterType};
+use image::{
+    ColorType, DynamicImage, ImageFormat, ImageReader, Limits, RgbImage, imageops::FilterType,
+};
 
-use crate::PerceptionError;
+use crate::{ClassMask, NUM_CLASSES, PerceptionError};
 
 /// The largest width or height accepted, in pixels; bigger images are refused before decoding.
 pub const MAX_IMAGE_SIDE: u32 = 8192;
@@ -14,7 +17,7 @@ pub const NORMALIZE_MEAN: [f32; 3] = [0.485, 0.456, 0.406];
 /// Per-channel standard deviation that the model was trained with (ImageNet's).
 pub const NORMALIZE_STD: [f32; 3] = [0.229, 0.224, 0.225];
 
-/// An image as it arrives in a frame: encoded bytes, or raw packed RGB8 rows.
+/// An image as it arrives in a frame: encoded bytes, or raw packed rows.
 #[derive(Debug, Clone, Copy)]
 pub enum ImageData<'a> {
     /// A PNG file's bytes (any colour type; converted to RGB8).
@@ -30,6 +33,17 @@ pub enum ImageData<'a> {
         /// Bytes per row, at least `width * 3`.
         step: u32,
         /// At least `step * (height - 1) + width * 3` bytes.
+        data: &'a [u8],
+    },
+    /// Raw 8-bit single-channel pixels (a class image), `height` rows of `step` bytes.
+    Mono8 {
+        /// Pixels per row.
+        width: u32,
+        /// Rows.
+        height: u32,
+        /// Bytes per row, at least `width`.
+        step: u32,
+        /// At least `step * (height - 1) + width` bytes.
         data: &'a [u8],
     },
 }
@@ -56,22 +70,91 @@ impl<'a> ImageData<'a> {
 /// are refused.
 pub fn decode_image(data: ImageData<'_>) -> Result<RgbImage, PerceptionError> {
     match data {
-        ImageData::Png(bytes) => decode_encoded(bytes, ImageFormat::Png, "png"),
-        ImageData::Jpeg(bytes) => decode_encoded(bytes, ImageFormat::Jpeg, "jpeg"),
+        ImageData::Png(bytes) => Ok(decode_encoded(bytes, ImageFormat::Png, "png")?.into_rgb8()),
+        ImageData::Jpeg(bytes) => Ok(decode_encoded(bytes, ImageFormat::Jpeg, "jpeg")?.into_rgb8()),
         ImageData::Rgb8 {
             width,
             height,
             step,
             data,
-        } => decode_raw(width, height, step, data),
+        } => {
+            let pixels = packed_rows(width, height, step, 3, data, "rgb8")?;
+            RgbImage::from_raw(width, height, pixels).ok_or_else(|| {
+                PerceptionError::invalid_input("raw.data", width, "buffer does not match the size")
+            })
+        }
+        ImageData::Mono8 { .. } => Err(PerceptionError::invalid_input(
+            "raw.encoding",
+            "\"mono8\"",
+            "the model needs colour: \"rgb8\", PNG or JPEG",
+        )),
     }
+}
+
+/// Decodes a class image (pixel value = `SemanticClass` id) into a [`ClassMask`]: an 8-bit
+/// grayscale PNG or raw mono8 rows. JPEG (lossy, it would change the ids), colour images and ids
+/// of no class are refused, naming the field.
+pub fn decode_class_mask(data: ImageData<'_>) -> Result<ClassMask, PerceptionError> {
+    let (width, height, pixels, field) = match data {
+        ImageData::Png(bytes) => {
+            let image = decode_encoded(bytes, ImageFormat::Png, "png")?;
+            if image.color() != ColorType::L8 {
+                return Err(PerceptionError::invalid_input(
+                    "compressed.data",
+                    format!("a {:?} PNG", image.color()),
+                    "a class image is 8-bit grayscale (L8), one class id per pixel",
+                ));
+            }
+            let gray = image.into_luma8();
+            (
+                gray.width(),
+                gray.height(),
+                gray.into_raw(),
+                "compressed.data",
+            )
+        }
+        ImageData::Jpeg(_) => {
+            return Err(PerceptionError::invalid_input(
+                "compressed.format",
+                "\"jpeg\"",
+                "a class image must be lossless: PNG or raw mono8",
+            ));
+        }
+        ImageData::Rgb8 { .. } => {
+            return Err(PerceptionError::invalid_input(
+                "raw.encoding",
+                "\"rgb8\"",
+                "a class image is \"mono8\", one class id per pixel",
+            ));
+        }
+        ImageData::Mono8 {
+            width,
+            height,
+            step,
+            data,
+        } => (
+            width,
+            height,
+            packed_rows(width, height, step, 1, data, "mono8")?,
+            "raw.data",
+        ),
+    };
+    if let Some(i) = pixels.iter().position(|&c| usize::from(c) >= NUM_CLASSES) {
+        let w = width as usize;
+        return Err(PerceptionError::invalid_input(
+            field,
+            format!("{} at pixel ({}, {})", pixels[i], i % w, i / w),
+            format!("class ids are below {NUM_CLASSES}"),
+        ));
+    }
+    ClassMask::new(width, height, pixels)
 }
 
 fn decode_encoded(
     bytes: &[u8],
     format: ImageFormat,
     name: &str,
-) -> Result<RgbImage, PerceptionError> {
+) -> Result<DynamicImage, PerceptionError> {
     if bytes.is_empty() {
         return Err(PerceptionError::Decode {
             format: name.to_owned(),
@@ -83,19 +166,22 @@ fn decode_encoded(
     limits.max_image_width = Some(MAX_IMAGE_SIDE);
     limits.max_image_height = Some(MAX_IMAGE_SIDE);
     reader.limits(limits);
-    let image = reader.decode().map_err(|e| PerceptionError::Decode {
+    reader.decode().map_err(|e| PerceptionError::Decode {
         format: name.to_owned(),
         message: e.to_string(),
-    })?;
-    Ok(image.into_rgb8())
+    })
 }
 
-fn decode_raw(
+/// Checks a raw image's layout and packs its rows (`channels` bytes per pixel), dropping any
+/// padding.
+fn packed_rows(
     width: u32,
     height: u32,
     step: u32,
+    channels: usize,
     data: &[u8],
-) -> Result<RgbImage, PerceptionError> {
+    encoding: &str,
+) -> Result<Vec<u8>, PerceptionError> {
     if width == 0 || width > MAX_IMAGE_SIDE {
         return Err(PerceptionError::invalid_input(
             "raw.width",
@@ -110,13 +196,13 @@ fn decode_raw(
             format!("must be in 1..={MAX_IMAGE_SIDE}"),
         ));
     }
-    let row = width as usize * 3;
+    let row = width as usize * channels;
     let step = step as usize;
     if step < row {
         return Err(PerceptionError::invalid_input(
             "raw.step",
             step,
-            format!("must be at least width * 3 = {row}"),
+            format!("must be at least width * {channels} = {row}"),
         ));
     }
     let needed = step * (height as usize - 1) + row;
@@ -124,16 +210,14 @@ fn decode_raw(
         return Err(PerceptionError::invalid_input(
             "raw.data",
             format!("{} bytes", data.len()),
-            format!("{width}x{height} rgb8 with step {step} needs at least {needed} bytes"),
+            format!("{width}x{height} {encoding} with step {step} needs at least {needed} bytes"),
         ));
     }
     let mut pixels = Vec::with_capacity(row * height as usize);
     for r in 0..height as usize {
         pixels.extend_from_slice(&data[r * step..r * step + row]);
     }
-    RgbImage::from_raw(width, height, pixels).ok_or_else(|| {
-        PerceptionError::invalid_input("raw.data", width, "buffer does not match the size")
-    })
+    Ok(pixels)
 }
 
 /// Resizes (bilinear) to `width × height` and normalises with [`NORMALIZE_MEAN`] and
@@ -212,6 +296,73 @@ mod tests {
         let err = decode_image(ImageData::Jpeg(&png)).unwrap_err();
         assert!(err.to_string().contains("jpeg"), "{err}");
         assert!(ImageData::compressed("bmp", &png).is_err());
+    }
+
+    #[test]
+    fn class_images_decode_from_gray_png_and_padded_mono8() {
+        let labels = image::GrayImage::from_fn(3, 2, |x, y| image::Luma([(x + 3 * y) as u8 + 1]));
+        let mut png = Vec::new();
+        labels
+            .write_to(&mut Cursor::new(&mut png), ImageFormat::Png)
+            .unwrap();
+        let mask = decode_class_mask(ImageData::Png(&png)).unwrap();
+        assert_eq!((mask.width(), mask.height()), (3, 2));
+        assert_eq!(mask.as_slice(), &[1, 2, 3, 4, 5, 6]);
+        let raw = decode_class_mask(ImageData::Mono8 {
+            width: 3,
+            height: 2,
+            step: 4,
+            data: &[1, 2, 3, 99, 4, 5, 6],
+        })
+        .unwrap();
+        assert_eq!(raw, mask);
+    }
+
+    #[test]
+    fn bad_class_images_name_the_field() {
+        let msg = |e: PerceptionError| e.to_string();
+        // An id of no class, with where it is.
+        let e = decode_class_mask(ImageData::Mono8 {
+            width: 2,
+            height: 1,
+            step: 2,
+            data: &[4, 200],
+        })
+        .unwrap_err();
+        let e = msg(e);
+        assert!(
+            e.contains("raw.data") && e.contains("200 at pixel (1, 0)"),
+            "{e}"
+        );
+        // A colour PNG.
+        let rgb = RgbImage::from_pixel(2, 2, image::Rgb([4, 4, 4]));
+        let mut png = Vec::new();
+        rgb.write_to(&mut Cursor::new(&mut png), ImageFormat::Png)
+            .unwrap();
+        let e = msg(decode_class_mask(ImageData::Png(&png)).unwrap_err());
+        assert!(e.contains("compressed.data") && e.contains("Rgb8"), "{e}");
+        let e = msg(decode_class_mask(ImageData::Jpeg(&png)).unwrap_err());
+        assert!(
+            e.contains("compressed.format") && e.contains("lossless"),
+            "{e}"
+        );
+        let e = msg(decode_class_mask(ImageData::Mono8 {
+            width: 4,
+            height: 2,
+            step: 3,
+            data: &[0; 8],
+        })
+        .unwrap_err());
+        assert!(e.contains("raw.step"), "{e}");
+        // And a class image is no camera image.
+        let e = msg(decode_image(ImageData::Mono8 {
+            width: 1,
+            height: 1,
+            step: 1,
+            data: &[4],
+        })
+        .unwrap_err());
+        assert!(e.contains("raw.encoding"), "{e}");
     }
 
     #[test]

@@ -45,7 +45,9 @@ pub mod mask;
 pub mod segmenter;
 
 pub use camera::{CameraModel, classify_points};
-pub use decode::{ImageData, NORMALIZE_MEAN, NORMALIZE_STD, decode_image, preprocess};
+pub use decode::{
+    ImageData, NORMALIZE_MEAN, NORMALIZE_STD, decode_class_mask, decode_image, preprocess,
+};
 pub use error::PerceptionError;
 pub use image::RgbImage;
 pub use keep_out::ObstacleRays;

@@ -69,7 +69,8 @@ pub struct DetectArgs {
     #[arg(long, value_name = "K", requires = "recording")]
     pub frame: Option<u64>,
     /// Where point classes come from: auto (model if an image and a model, else the cloud's
-    /// classes, else none), model, point-classes or none.
+    /// classes, else none), model, class-image (the recording's true label image), point-classes
+    /// or none.
     #[arg(long, value_enum, default_value_t = ModeArg::Auto)]
     pub segmentation: ModeArg,
     /// ONNX segmentation model. Default for recordings: models/rooftop-segmentation.onnx when that
@@ -107,6 +108,7 @@ pub struct DetectArgs {
 pub enum ModeArg {
     Auto,
     Model,
+    ClassImage,
     PointClasses,
     None,
 }
@@ -132,6 +134,7 @@ impl DetectArgs {
         let segmentation_mode = match self.segmentation {
             ModeArg::Auto => SegmentationMode::Auto,
             ModeArg::Model => SegmentationMode::Model,
+            ModeArg::ClassImage => SegmentationMode::ClassImage,
             ModeArg::PointClasses => SegmentationMode::PointClasses,
             ModeArg::None => SegmentationMode::None,
         };

@@ -107,8 +107,8 @@ impl Checker {
 impl TryFrom<&v1::Frame> for Frame {
     type Error = Error;
 
-    /// Checks `drone_id`, `timestamp`, `point_cloud` (layout, length, values, pose), `image`
-    /// (pose, calibration, pixels) and `geodetic_origin`.
+    /// Checks `drone_id`, `timestamp`, `point_cloud` (layout, length, values, pose), `image` and
+    /// `class_image` (pose, calibration, pixels) and `geodetic_origin`.
     fn try_from(f: &v1::Frame) -> Result<Self, Error> {
         let mut c = Checker::new("frame");
         if f.drone_id.len() > 256 {
@@ -129,19 +129,24 @@ impl TryFrom<&v1::Frame> for Frame {
         };
         let image = match &f.image {
             None => Some(None),
-            Some(img) => camera_image(&mut c, img).map(Some),
+            Some(img) => camera_image(&mut c, "image", img, ImageKind::Colour).map(Some),
+        };
+        let class_image = match &f.class_image {
+            None => Some(None),
+            Some(img) => camera_image(&mut c, "class_image", img, ImageKind::Classes).map(Some),
         };
         let geodetic_origin = match &f.geodetic_origin {
             None => Some(None),
             Some(g) => geodetic(&mut c, g).map(Some),
         };
-        let frame = match (cloud, image, geodetic_origin) {
-            (Some(cloud), Some(image), Some(geodetic_origin)) => Some(Frame {
+        let frame = match (cloud, image, class_image, geodetic_origin) {
+            (Some(cloud), Some(image), Some(class_image), Some(geodetic_origin)) => Some(Frame {
                 drone_id: f.drone_id.clone(),
                 sequence: f.sequence,
                 timestamp: f.timestamp,
                 cloud,
                 image,
+                class_image,
                 geodetic_origin,
             }),
             _ => None,
@@ -367,28 +372,44 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
     })
 }
 
-fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
+/// What a camera image of a frame carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ImageKind {
+    /// `Frame.image`: colour for the model (PNG, JPEG or raw "rgb8").
+    Colour,
+    /// `Frame.class_image`: one class id per pixel (PNG or raw "mono8"; JPEG would change ids).
+    Classes,
+}
+
+/// Checks `frame.<field>` (`image` or `class_image`): pose, calibration and the pixels' layout.
+/// The pixels themselves are decoded by the pipeline, which names the same fields.
+fn camera_image(
+    c: &mut Checker,
+    field: &str,
+    img: &v1::CameraImage,
+    kind: ImageKind,
+) -> Option<CameraImage> {
     let before = c.violations.len();
     if let Some(t) = &img.timestamp {
-        check_timestamp(c, "image.timestamp", t);
+        check_timestamp(c, &format!("{field}.timestamp"), t);
     }
     let pose = match &img.pose {
         None => {
-            c.bad("image.pose", "required (T_world_camera)");
+            c.bad(format!("{field}.pose"), "required (T_world_camera)");
             None
         }
-        Some(p) => pose_of(c, "image.pose", p),
+        Some(p) => pose_of(c, &format!("{field}.pose"), p),
     };
     let intrinsics = match &img.calibration {
         None => {
-            c.bad("image.calibration", "required");
+            c.bad(format!("{field}.calibration"), "required");
             None
         }
         Some(k) => {
             for (name, v) in [("width", k.width), ("height", k.height)] {
                 if v == 0 || v > MAX_IMAGE_SIDE {
                     c.bad(
-                        format!("image.calibration.{name}"),
+                        format!("{field}.calibration.{name}"),
                         format!("{v} is outside 1..={MAX_IMAGE_SIDE}"),
                     );
                 }
@@ -396,7 +417,7 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
             for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
                 if !(v.is_finite() && v > 0.0) {
                     c.bad(
-                        format!("image.calibration.{name}"),
+                        format!("{field}.calibration.{name}"),
                         format!("{v} must be a positive focal length in pixels"),
                     );
                 }
@@ -404,7 +425,7 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
             for (name, v) in [("cx", k.cx), ("cy", k.cy)] {
                 if !v.is_finite() {
                     c.bad(
-                        format!("image.calibration.{name}"),
+                        format!("{field}.calibration.{name}"),
                         format!("{v} is not finite"),
                     );
                 }
@@ -421,24 +442,36 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
     };
     let pixels = match &img.image {
         None => {
-            c.bad("image.image", "required: compressed or raw pixels");
+            c.bad(
+                format!("{field}.image"),
+                "required: compressed or raw pixels",
+            );
             None
         }
         Some(v1::camera_image::Image::Compressed(ci)) => {
-            let format = ci.format.to_ascii_lowercase();
-            let format = match format.as_str() {
-                "png" => Some("png"),
-                "jpeg" | "jpg" => Some("jpeg"),
-                _ => {
+            let format = match (ci.format.to_ascii_lowercase().as_str(), kind) {
+                ("png", _) => Some("png"),
+                ("jpeg" | "jpg", ImageKind::Colour) => Some("jpeg"),
+                (_, ImageKind::Colour) => {
                     c.bad(
-                        "image.compressed.format",
+                        format!("{field}.compressed.format"),
                         format!("{:?} is neither \"png\" nor \"jpeg\"", ci.format),
+                    );
+                    None
+                }
+                (_, ImageKind::Classes) => {
+                    c.bad(
+                        format!("{field}.compressed.format"),
+                        format!(
+                            "{:?} is not \"png\" (a class image must be lossless)",
+                            ci.format
+                        ),
                     );
                     None
                 }
             };
             if ci.data.is_empty() {
-                c.bad("image.compressed.data", "is empty");
+                c.bad(format!("{field}.compressed.data"), "is empty");
             }
             format.map(|f| ImagePixels::Encoded {
                 format: f.to_owned(),
@@ -446,22 +479,26 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
             })
         }
         Some(v1::camera_image::Image::Raw(raw)) => {
-            if raw.encoding != "rgb8" {
+            let (encoding, channels) = match kind {
+                ImageKind::Colour => ("rgb8", 3),
+                ImageKind::Classes => ("mono8", 1),
+            };
+            if raw.encoding != encoding {
                 c.bad(
-                    "image.raw.encoding",
-                    format!("{:?} is not \"rgb8\"", raw.encoding),
+                    format!("{field}.raw.encoding"),
+                    format!("{:?} is not \"{encoding}\"", raw.encoding),
                 );
             }
             if let Some(k) = &intrinsics {
                 if raw.width != k.width {
                     c.bad(
-                        "image.raw.width",
+                        format!("{field}.raw.width"),
                         format!("{} does not match calibration.width {}", raw.width, k.width),
                     );
                 }
                 if raw.height != k.height {
                     c.bad(
-                        "image.raw.height",
+                        format!("{field}.raw.height"),
                         format!(
                             "{} does not match calibration.height {}",
                             raw.height, k.height
@@ -469,19 +506,19 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
                     );
                 }
             }
-            let row = u64::from(raw.width) * 3;
+            let row = u64::from(raw.width) * channels;
             if u64::from(raw.step) < row {
                 c.bad(
-                    "image.raw.step",
-                    format!("{} is less than width * 3 = {row}", raw.step),
+                    format!("{field}.raw.step"),
+                    format!("{} is less than width * {channels} = {row}", raw.step),
                 );
             } else if raw.height > 0 {
                 let needed = u64::from(raw.step) * u64::from(raw.height - 1) + row;
                 if (raw.data.len() as u64) < needed {
                     c.bad(
-                        "image.raw.data",
+                        format!("{field}.raw.data"),
                         format!(
-                            "{} bytes; {}x{} rgb8 with step {} needs {needed}",
+                            "{} bytes; {}x{} {encoding} with step {} needs {needed}",
                             raw.data.len(),
                             raw.width,
                             raw.height,
@@ -490,11 +527,20 @@ fn camera_image(c: &mut Checker, img: &v1::CameraImage) -> Option<CameraImage> {
                     );
                 }
             }
-            Some(ImagePixels::Rgb8 {
-                width: raw.width,
-                height: raw.height,
-                step: raw.step,
-                data: raw.data.to_vec(),
+            let (width, height, step, data) = (raw.width, raw.height, raw.step, raw.data.to_vec());
+            Some(match kind {
+                ImageKind::Colour => ImagePixels::Rgb8 {
+                    width,
+                    height,
+                    step,
+                    data,
+                },
+                ImageKind::Classes => ImagePixels::Mono8 {
+                    width,
+                    height,
+                    step,
+                    data,
+                },
             })
         }
     };
@@ -670,6 +716,7 @@ impl From<v1::SegmentationMode> for SegmentationMode {
             v1::SegmentationMode::Model => Self::Model,
             v1::SegmentationMode::PointClasses => Self::PointClasses,
             v1::SegmentationMode::None => Self::None,
+            v1::SegmentationMode::ClassImage => Self::ClassImage,
         }
     }
 }
@@ -681,6 +728,7 @@ impl From<SegmentationMode> for v1::SegmentationMode {
             SegmentationMode::Model => Self::Model,
             SegmentationMode::PointClasses => Self::PointClasses,
             SegmentationMode::None => Self::None,
+            SegmentationMode::ClassImage => Self::ClassImage,
         }
     }
 }

@@ -30,13 +30,15 @@ pub fn detect_ply(
             pose: Isometry3::identity(),
         },
         image: None,
+        class_image: None,
         geodetic_origin: None,
     };
     run_pipeline(&frame, options, pipeline)
 }
 
 /// Reads the MCAP recording at `path` and runs the pipeline on the frame with sequence number
-/// `sequence` (the first frame when `None`): image, cloud and poses, as the service would.
+/// `sequence` (the first frame when `None`): image, cloud and poses, as the service would. In
+/// class-image mode the frame's class image is the recording's true label image.
 pub fn detect_recording(
     path: &Path,
     sequence: Option<u64>,
@@ -64,8 +66,17 @@ pub fn detect_recording(
             .first()
             .ok_or_else(|| io("the recording has no frame".into()))?,
     };
-    let frame = Frame::try_from(&recorded.frame)?;
-    run_pipeline(&frame, options, pipeline)
+    let mut frame = recorded.frame.clone();
+    if options.segmentation_mode == SegmentationMode::ClassImage {
+        frame.class_image = Some(recorded.labels.clone().ok_or_else(|| {
+            io(format!(
+                "frame {} has no label image ({}) for --segmentation class-image",
+                frame.sequence,
+                landing_sim::recording::LABELS_TOPIC
+            ))
+        })?);
+    }
+    run_pipeline(&Frame::try_from(&frame)?, options, pipeline)
 }
 
 /// The result as the JSON document of `detect --json`.
@@ -163,6 +174,7 @@ pub fn mode_name(mode: SegmentationMode) -> &'static str {
     match mode {
         SegmentationMode::Auto => "auto",
         SegmentationMode::Model => "model",
+        SegmentationMode::ClassImage => "class_image",
         SegmentationMode::PointClasses => "point_classes",
         SegmentationMode::None => "none",
     }

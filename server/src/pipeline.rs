@@ -16,12 +16,14 @@ use crate::segmentation::{self, Segmenter};
 /// Where the point classes of a frame come from. `Auto` is the proto's UNSPECIFIED.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SegmentationMode {
-    /// Model if the frame has an image and the server a model, else the cloud's classes if it has
-    /// them, else none.
+    /// The frame's class image if it has one, else the model if the frame has an image and the
+    /// server a model, else the cloud's classes if it has them, else none.
     #[default]
     Auto,
     /// Segment the image with the server's model.
     Model,
+    /// Use the frame's class image (for example the drone's own segmentation, or ground truth).
+    ClassImage,
     /// Use the cloud's "class" field.
     PointClasses,
     /// Geometry only.
@@ -49,6 +51,13 @@ pub enum ImagePixels {
         step: u32,
         data: Vec<u8>,
     },
+    /// Packed 8-bit rows of class ids (a class image).
+    Mono8 {
+        width: u32,
+        height: u32,
+        step: u32,
+        data: Vec<u8>,
+    },
 }
 
 /// Pinhole intrinsics: `u = fx * x / z + cx`, `v = fy * y / z + cy`.
@@ -62,7 +71,8 @@ pub struct Intrinsics {
     pub cy: f64,
 }
 
-/// A validated camera image: pixels, `T_world_camera` (optical convention) and intrinsics.
+/// A validated camera or class image: pixels, `T_world_camera` (optical convention) and
+/// intrinsics.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraImage {
     pub pixels: ImagePixels,
@@ -78,6 +88,8 @@ pub struct Frame {
     pub timestamp: Option<prost_types::Timestamp>,
     pub cloud: Cloud,
     pub image: Option<CameraImage>,
+    /// Per-pixel class ids of a camera (`Frame.class_image`).
+    pub class_image: Option<CameraImage>,
     pub geodetic_origin: Option<Geodetic>,
 }
 
@@ -190,7 +202,9 @@ impl Pipeline {
         requested: SegmentationMode,
     ) -> Result<SegmentationMode, Error> {
         match requested {
-            SegmentationMode::Auto => Ok(if frame.image.is_some() && self.segmenter.is_some() {
+            SegmentationMode::Auto => Ok(if frame.class_image.is_some() {
+                SegmentationMode::ClassImage
+            } else if frame.image.is_some() && self.segmenter.is_some() {
                 SegmentationMode::Model
             } else if frame.cloud.classes.is_some() {
                 SegmentationMode::PointClasses
@@ -210,6 +224,15 @@ impl Pipeline {
                     ));
                 }
                 Ok(SegmentationMode::Model)
+            }
+            SegmentationMode::ClassImage => {
+                if frame.class_image.is_none() {
+                    return Err(Error::invalid(
+                        "frame.class_image",
+                        "segmentation mode CLASS_IMAGE needs a class image, and the frame has none",
+                    ));
+                }
+                Ok(SegmentationMode::ClassImage)
             }
             SegmentationMode::PointClasses => {
                 if frame.cloud.classes.is_none() {
@@ -238,17 +261,21 @@ pub fn run_pipeline(
 
     let world = to_world(&frame.cloud);
     // Every image is decoded, so that a bad one is reported whatever the mode.
+    let decode_start = Instant::now();
     let decoded = match &frame.image {
-        Some(image) => {
-            let t = Instant::now();
-            let rgb = segmentation::decode(image)?;
-            timings.decode = Some(t.elapsed());
-            Some((image, rgb))
-        }
+        Some(image) => Some((image, segmentation::decode(image)?)),
         None => None,
     };
-    let model_classes;
+    let class_mask = match &frame.class_image {
+        Some(image) => Some((image, segmentation::decode_classes(image)?)),
+        None => None,
+    };
+    if decoded.is_some() || class_mask.is_some() {
+        timings.decode = Some(decode_start.elapsed());
+    }
+    let landable = &options.params.landable_classes;
     let mut obstacles = None;
+    let mask_classes;
     let classes: Option<&[u8]> = match mode {
         SegmentationMode::Model => {
             let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
@@ -256,12 +283,24 @@ pub fn run_pipeline(
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out = segmenter.classify(camera, rgb, &world, &options.params.landable_classes)?;
+            let out = segmenter.classify(camera, rgb, &world, landable)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
-            model_classes = out.classes;
+            mask_classes = out.classes;
             obstacles = Some(out.obstacles);
-            Some(&model_classes)
+            Some(&mask_classes)
+        }
+        SegmentationMode::ClassImage => {
+            let Some((camera, mask)) = &class_mask else {
+                return Err(Error::Internal(
+                    "class image mode without a class image".into(),
+                ));
+            };
+            let out = segmentation::classify_with_mask(camera, mask, &world, landable);
+            timings.classification = Some(out.classification);
+            mask_classes = out.classes;
+            obstacles = Some(out.obstacles);
+            Some(&mask_classes)
         }
         SegmentationMode::PointClasses => frame.cloud.classes.as_deref(),
         SegmentationMode::None | SegmentationMode::Auto => None,
@@ -367,6 +406,7 @@ mod tests {
                 pose: Isometry3::identity(),
             },
             image: None,
+            class_image: None,
             geodetic_origin: None,
         }
     }

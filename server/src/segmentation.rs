@@ -1,12 +1,13 @@
 //! The segmentation model of the server: decodes a frame's camera image, segments it on one of
 //! its own ONNX Runtime sessions, and gives each point the class of the pixel it projects to.
+//! A frame's class image (the drone's own segmentation) takes the same path from the mask on.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use landing_perception::{
     CameraModel, ClassMask, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
-    SegmenterConfig, classify_points, decode_image,
+    SegmenterConfig, classify_points, decode_class_mask, decode_image,
 };
 
 use crate::Error;
@@ -111,8 +112,7 @@ impl Segmenter {
     }
 
     /// Segments the decoded `image` at every input size and fuses the masks (a pixel is landable
-    /// only where every size says so), gives each world point the class of its pixel, and
-    /// collects the rays of the pixels whose class is not in `landable`.
+    /// only where every size says so), then classifies as [`classify_with_mask`] does.
     pub fn classify(
         &self,
         camera: &CameraImage,
@@ -128,77 +128,133 @@ impl Segmenter {
             .iter()
             .map(|&(w, h)| session.segment_at(image, w, h))
             .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| perception_error(&e))?;
-        // Unknown (0) is no obstacle: the points there get no class and the pixels no disk.
-        let is_obstacle = |c: u8| c != 0 && !landable.contains(&c);
-        let mask = ClassMask::fuse_keeping_obstacles(&masks, is_obstacle)
+            .map_err(|e| model_error(&e))?;
+        let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
-        let t1 = Instant::now();
-        let k = camera.intrinsics;
-        let model = CameraModel {
-            pose: camera.pose,
-            fx: k.fx,
-            fy: k.fy,
-            cx: k.cx,
-            cy: k.cy,
-            width: k.width,
-            height: k.height,
-        };
-        let classes = classify_points(world_points, &model, &mask);
-        let obstacles = ObstacleRays::new(&model, &mask, world_points, is_obstacle);
+        let segmentation = t0.elapsed();
         Ok(Classified {
-            classes,
-            obstacles,
-            segmentation: t1 - t0,
-            classification: t1.elapsed(),
+            segmentation,
+            ..classify_with_mask(camera, &mask, world_points, landable)
         })
+    }
+}
+
+/// Whether a class is an obstacle for landing: any class outside `landable` but unknown (0),
+/// whose points get no class and whose pixels no keep-out disk.
+fn obstacle_test(landable: &[u8]) -> impl Fn(u8) -> bool + '_ {
+    move |c| c != 0 && !landable.contains(&c)
+}
+
+/// Gives each world point the class of the pixel of `mask` (stretched over `camera`'s image) it
+/// projects to, and collects the rays of the obstacle pixels (classes outside `landable`).
+pub fn classify_with_mask(
+    camera: &CameraImage,
+    mask: &ClassMask,
+    world_points: &[[f32; 3]],
+    landable: &[u8],
+) -> Classified {
+    let t = Instant::now();
+    let k = camera.intrinsics;
+    let model = CameraModel {
+        pose: camera.pose,
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+        width: k.width,
+        height: k.height,
+    };
+    let classes = classify_points(world_points, &model, mask);
+    let obstacles = ObstacleRays::new(&model, mask, world_points, obstacle_test(landable));
+    Classified {
+        classes,
+        obstacles,
+        segmentation: Duration::ZERO,
+        classification: t.elapsed(),
     }
 }
 
 /// Decodes the frame's image and checks it against the calibration's size.
 pub fn decode(camera: &CameraImage) -> Result<RgbImage, Error> {
-    let (data, field) = match &camera.pixels {
-        ImagePixels::Encoded { format, data } => (
-            ImageData::compressed(format, data)
-                .map_err(|e| Error::invalid("frame.image.compressed.format", e.to_string()))?,
-            "frame.image.compressed.data",
-        ),
-        ImagePixels::Rgb8 {
+    const IMAGE: &str = "frame.image";
+    let image = decode_image(image_data(camera)).map_err(|e| input_error(IMAGE, camera, &e))?;
+    check_size(IMAGE, camera, image.width(), image.height())?;
+    Ok(image)
+}
+
+/// Decodes the frame's class image and checks it against its calibration's size.
+pub fn decode_classes(camera: &CameraImage) -> Result<ClassMask, Error> {
+    const IMAGE: &str = "frame.class_image";
+    let mask = decode_class_mask(image_data(camera)).map_err(|e| input_error(IMAGE, camera, &e))?;
+    check_size(IMAGE, camera, mask.width(), mask.height())?;
+    Ok(mask)
+}
+
+/// The pixels as perception takes them (the format was checked with the frame).
+fn image_data(camera: &CameraImage) -> ImageData<'_> {
+    match &camera.pixels {
+        ImagePixels::Encoded { format, data } if format == "jpeg" => ImageData::Jpeg(data),
+        ImagePixels::Encoded { data, .. } => ImageData::Png(data),
+        &ImagePixels::Rgb8 {
+            width,
+            height,
+            step,
+            ref data,
+        } => ImageData::Rgb8 {
             width,
             height,
             step,
             data,
-        } => (
-            ImageData::Rgb8 {
-                width: *width,
-                height: *height,
-                step: *step,
-                data,
-            },
-            "frame.image.raw.data",
-        ),
-    };
-    let image = decode_image(data).map_err(|e| Error::invalid(field, e.to_string()))?;
-    let k = camera.intrinsics;
-    if (image.width(), image.height()) != (k.width, k.height) {
-        return Err(Error::invalid(
-            field,
-            format!(
-                "the image is {}x{} but frame.image.calibration says {}x{}",
-                image.width(),
-                image.height(),
-                k.width,
-                k.height
-            ),
-        ));
+        },
+        &ImagePixels::Mono8 {
+            width,
+            height,
+            step,
+            ref data,
+        } => ImageData::Mono8 {
+            width,
+            height,
+            step,
+            data,
+        },
     }
-    Ok(image)
 }
 
-/// Perception errors at run time: bad input is the caller's, the rest is the model's.
-fn perception_error(e: &PerceptionError) -> Error {
+/// The field holding the pixels of `image`: `<image>.compressed.data` or `<image>.raw.data`.
+fn data_field(image: &str, camera: &CameraImage) -> String {
+    match camera.pixels {
+        ImagePixels::Encoded { .. } => format!("{image}.compressed.data"),
+        _ => format!("{image}.raw.data"),
+    }
+}
+
+fn check_size(image: &str, camera: &CameraImage, width: u32, height: u32) -> Result<(), Error> {
+    let k = camera.intrinsics;
+    if (width, height) == (k.width, k.height) {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        data_field(image, camera),
+        format!(
+            "the image is {width}x{height} but {image}.calibration says {}x{}",
+            k.width, k.height
+        ),
+    ))
+}
+
+/// A decoding error of `image`, named by the field it is about.
+fn input_error(image: &str, camera: &CameraImage, e: &PerceptionError) -> Error {
     match e {
-        PerceptionError::Decode { .. } => Error::invalid("frame.image", e.to_string()),
+        PerceptionError::InvalidInput { field, .. } => {
+            Error::invalid(format!("{image}.{field}"), e.to_string())
+        }
+        _ => Error::invalid(data_field(image, camera), e.to_string()),
+    }
+}
+
+/// Model errors at run time: the image was decoded, so they are the model's.
+fn model_error(e: &PerceptionError) -> Error {
+    match e {
         PerceptionError::InvalidInput { field, .. } => {
             Error::invalid(format!("frame.image.{field}"), e.to_string())
         }

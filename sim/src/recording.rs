@@ -265,6 +265,8 @@ pub fn frame_messages(
             })),
         }),
         geodetic_origin: None,
+        // The true labels travel on their own topic, so that a replay is segmented by the server.
+        class_image: None,
     };
     let labels = v1::CameraImage {
         timestamp: Some(ts),

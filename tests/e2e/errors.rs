@@ -107,3 +107,71 @@ async fn a_deadline_that_passes_during_the_computation_is_deadline_exceeded() {
     assert_eq!(e.code, tonic::Code::DeadlineExceeded, "{e}");
     server.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn class_image_errors_name_the_field() {
+    let server = TestServer::start().await;
+    let client = server.client().await;
+    let recorded = &scene(31).frames[0];
+    let labels = recorded.labels.clone().expect("labels");
+    let frame = recorded.frame.clone();
+    let fields = |err: ClientError| match err {
+        ClientError::Status(e) => {
+            assert_eq!(e.code, tonic::Code::InvalidArgument, "{e}");
+            e.fields().iter().map(|f| f.to_string()).collect::<Vec<_>>()
+        }
+        other => panic!("{other}"),
+    };
+    let class_mode = Some(mode(SegmentationMode::ClassImage));
+
+    // Asked for, but not sent.
+    let err = client
+        .detect_with(frame.clone(), class_mode.clone())
+        .await
+        .unwrap_err();
+    assert_eq!(fields(err), ["frame.class_image"]);
+
+    // A JPEG would change the class numbers.
+    let mut jpeg = labels.clone();
+    if let Some(landing_client::v1::camera_image::Image::Compressed(c)) = &mut jpeg.image {
+        c.format = "jpeg".into();
+    }
+    let mut f = frame.clone();
+    f.class_image = Some(jpeg);
+    let err = client.detect_with(f, class_mode.clone()).await.unwrap_err();
+    assert_eq!(fields(err), ["frame.class_image.compressed.format"]);
+
+    // A number that is no class, found when the pixels are read.
+    let k = labels.calibration.expect("calibration");
+    let mut pixels = vec![4u8; (k.width * k.height) as usize];
+    pixels[7] = 99;
+    let bad = camera_image(
+        ImageData::Mono8 {
+            width: k.width,
+            height: k.height,
+            data: pixels,
+        },
+        labels.pose.expect("pose"),
+        k,
+    )
+    .expect("layout is fine");
+    let mut f = frame.clone();
+    f.class_image = Some(bad);
+    let err = client.detect_with(f, class_mode.clone()).await.unwrap_err();
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
+    assert_eq!(e.fields(), ["frame.class_image.raw.data"]);
+    assert!(e.to_string().contains("99 at pixel (7, 0)"), "{e}");
+
+    // The colour camera image is no class image.
+    let mut f = frame;
+    f.class_image = f.image.clone();
+    let err = client.detect_with(f, class_mode).await.unwrap_err();
+    let got = fields(err);
+    assert!(
+        got == ["frame.class_image.compressed.data"],
+        "an RGB PNG is refused by its pixels: {got:?}"
+    );
+    server.stop().await;
+}

@@ -20,7 +20,8 @@ pub enum Mode {
     Geometry,
     /// `SEGMENTATION_MODE_MODEL`: the server's segmentation model on the camera image.
     Model,
-    /// `SEGMENTATION_MODE_POINT_CLASSES`: the cloud's true classes (the upper bound).
+    /// `SEGMENTATION_MODE_CLASS_IMAGE` with the true label image: perfect segmentation, the
+    /// upper bound of `Model` (same classification and keep-out, from the true mask).
     Truth,
 }
 
@@ -43,7 +44,7 @@ impl Mode {
         match self {
             Mode::Geometry => S::None,
             Mode::Model => S::Model,
-            Mode::Truth => S::PointClasses,
+            Mode::Truth => S::ClassImage,
         }
     }
 

@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use landing_proto::v1::{Frame, FrameResult, LandingSite, PipelineOptions, StageTimings};
+use landing_proto::v1::{
+    CameraImage, Frame, FrameResult, LandingSite, PipelineOptions, StageTimings,
+};
 
 use super::geom::{P2, Polygon2, convex_hull};
 use super::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
@@ -19,6 +21,8 @@ pub struct Scenario {
     /// Hard-case tags (`tarp`, `water_tower`, ...), from the ground truth.
     pub tags: Vec<String>,
     pub frame: Frame,
+    /// The true label image of the frame's camera, sent as its class image in `truth` mode.
+    pub labels: Option<CameraImage>,
     /// The roofs in view with their obstacles.
     pub roofs: Vec<RoofTruth>,
 }
@@ -185,11 +189,12 @@ pub async fn run(
                 segmentation_mode: mode.segmentation_mode() as i32,
                 ..config.options.clone()
             };
+            let mut frame = scenario.frame.clone();
+            if mode == Mode::Truth {
+                frame.class_image.clone_from(&scenario.labels);
+            }
             let started = Instant::now();
-            match client
-                .detect_with(scenario.frame.clone(), Some(options))
-                .await
-            {
+            match client.detect_with(frame, Some(options)).await {
                 Ok(result) => {
                     let record = record_of(scenario, mode, &result, started.elapsed(), &params);
                     if let Some(dir) = &config.overlay_dir {
@@ -304,6 +309,7 @@ mod tests {
             name: "t#1".into(),
             tags: vec![],
             frame,
+            labels: None,
             roofs: vec![roof],
         };
         fill_scanned_regions(&mut sc, 0.2).unwrap();

@@ -1,22 +1,15 @@
-//! Scenarios from `landing-sim` recordings: each `landing.v1.Frame` (topic `/frame`) paired by
-//! sequence number with its `landing.v1.GroundTruth` (topic `/ground_truth`), converted to the
-//! metrics' domain types.
+//! Scenarios from `landing-sim` recordings: each `landing.v1.Frame` (topic `/frame`) with its
+//! `landing.v1.GroundTruth` (`/ground_truth`) and true label image (`/camera/labels`), read by
+//! the simulator's own reader and converted to the metrics' domain types.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use landing_proto::v1::{Frame, GroundTruth, LinearRing, SemanticClass};
-use prost::Message;
+use landing_proto::v1::{CameraImage, Frame, GroundTruth, LinearRing, SemanticClass};
 
 use super::geom::{P2, Polygon2, bounds_of};
 use super::metrics::{Obstacle, RoofTruth};
 use super::run::Scenario;
 use crate::ClientError;
-
-/// Schema name of recorded ground truth.
-pub const TRUTH_SCHEMA: &str = "landing.v1.GroundTruth";
-/// Schema name of recorded frames.
-pub const FRAME_SCHEMA: &str = "landing.v1.Frame";
 
 /// Parapet walls of the simulated city are this thick at least and at most, metres. The ground
 /// truth gives the parapet's height, not its thickness; the thickness is read off the landable
@@ -27,55 +20,25 @@ pub const PARAPET_THICKNESS_M: (f64, f64) = (0.2, 0.45);
 pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, ClientError> {
     let mut out = Vec::new();
     for f in files {
-        let bytes = std::fs::read(f).map_err(|e| ClientError::Io {
-            path: f.display().to_string(),
-            source: e,
-        })?;
-        let pairs = pairs_from_bytes(&bytes).map_err(|reason| ClientError::Recording {
-            path: f.display().to_string(),
-            reason,
-        })?;
+        let recorded =
+            landing_sim::recording::read_recording(f).map_err(|e| ClientError::Recording {
+                path: f.display().to_string(),
+                reason: e.to_string(),
+            })?;
         let name = super::cli::short_name(f);
-        for (frame, truth) in pairs {
-            out.push(scenario_of(&name, frame, &truth));
+        for r in recorded {
+            if let Some(truth) = r.truth {
+                out.push(scenario_of(&name, r.frame, &truth, r.labels));
+            }
         }
     }
     if out.is_empty() {
         return Err(ClientError::InvalidInput {
             field: "recordings",
-            reason: format!("no frame with `{TRUTH_SCHEMA}` ground truth in {files:?}"),
+            reason: format!("no frame with ground truth (`/ground_truth`) in {files:?}"),
         });
     }
     Ok(out)
-}
-
-/// The (frame, ground truth) pairs of an MCAP file held in memory, in frame order.
-pub fn pairs_from_bytes(bytes: &[u8]) -> Result<Vec<(Frame, GroundTruth)>, String> {
-    let mut frames: BTreeMap<u64, Frame> = BTreeMap::new();
-    let mut truths: BTreeMap<u64, GroundTruth> = BTreeMap::new();
-    for message in mcap::MessageStream::new(bytes).map_err(|e| e.to_string())? {
-        let message = message.map_err(|e| e.to_string())?;
-        let Some(schema) = message.channel.schema.as_ref() else {
-            continue;
-        };
-        match schema.name.as_str() {
-            FRAME_SCHEMA => {
-                let f =
-                    Frame::decode(&message.data[..]).map_err(|e| format!("{FRAME_SCHEMA}: {e}"))?;
-                frames.insert(f.sequence, f);
-            }
-            TRUTH_SCHEMA => {
-                let t = GroundTruth::decode(&message.data[..])
-                    .map_err(|e| format!("{TRUTH_SCHEMA}: {e}"))?;
-                truths.insert(t.sequence, t);
-            }
-            _ => {}
-        }
-    }
-    Ok(frames
-        .into_iter()
-        .filter_map(|(seq, f)| truths.remove(&seq).map(|t| (f, t)))
-        .collect())
 }
 
 fn ring(r: Option<&LinearRing>) -> Vec<P2> {
@@ -86,7 +49,12 @@ fn ring(r: Option<&LinearRing>) -> Vec<P2> {
 /// Converts one frame's ground truth. Small buildings standing on a roof (obstacles of class
 /// building rooftop) are also added as raised roofs, not scored, so that a site on their top is
 /// judged against their footprint instead of counting as a site inside an obstacle.
-pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
+pub fn scenario_of(
+    file: &str,
+    frame: Frame,
+    truth: &GroundTruth,
+    labels: Option<CameraImage>,
+) -> Scenario {
     let mut roofs = Vec::new();
     let mut raised = Vec::new();
     for (k, r) in truth.roofs.iter().enumerate() {
@@ -144,6 +112,7 @@ pub fn scenario_of(file: &str, frame: Frame, truth: &GroundTruth) -> Scenario {
         name: format!("{file}#{}", frame.sequence),
         tags: tags_of(truth),
         frame,
+        labels,
         roofs,
     }
 }
