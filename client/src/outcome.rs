@@ -165,7 +165,12 @@ impl FrameError {
 impl std::fmt::Display for FrameError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "{}: {}", code_label(self.code), self.message)?;
-        for v in &self.field_violations {
+        // The service's message already names its fields; others' may not.
+        for v in self
+            .field_violations
+            .iter()
+            .filter(|v| !self.message.contains(v.field.as_str()))
+        {
             write!(f, "; {}: {}", v.field, v.description)?;
         }
         if let Some(d) = self.retry_delay {
@@ -253,6 +258,15 @@ mod tests {
         assert!(
             e.to_string()
                 .contains("invalid_argument: bad frame; frame.point_cloud.point_stride")
+        );
+        // A message that already names the field is not repeated.
+        let named = FrameError {
+            message: "`frame.point_cloud.point_stride`: must be > 0".into(),
+            ..e
+        };
+        assert_eq!(
+            named.to_string(),
+            "invalid_argument: `frame.point_cloud.point_stride`: must be > 0; retry after 1.5s"
         );
     }
 

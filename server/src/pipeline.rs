@@ -454,6 +454,33 @@ mod tests {
         assert!(e.to_string().contains("frame.point_cloud.fields"), "{e}");
         let e = p.resolve_mode(&bare, SegmentationMode::Model).unwrap_err();
         assert!(e.to_string().contains("frame.image"), "{e}");
+        let e = p
+            .resolve_mode(&bare, SegmentationMode::ClassImage)
+            .unwrap_err();
+        assert!(e.to_string().contains("frame.class_image"), "{e}");
+        // A class image comes first, even over the cloud's own classes.
+        let mut with_class_image = with_classes;
+        with_class_image.class_image = Some(CameraImage {
+            pixels: ImagePixels::Mono8 {
+                width: 1,
+                height: 1,
+                step: 1,
+                data: vec![4],
+            },
+            pose: Isometry3::identity(),
+            intrinsics: Intrinsics {
+                width: 1,
+                height: 1,
+                fx: 1.0,
+                fy: 1.0,
+                cx: 0.5,
+                cy: 0.5,
+            },
+        });
+        assert_eq!(
+            p.resolve_mode(&with_class_image, SegmentationMode::Auto),
+            Ok(SegmentationMode::ClassImage)
+        );
     }
 
     #[test]

@@ -14,16 +14,18 @@ async fn unary_detect_equals_in_process_pipeline() {
         SegmentationMode::None,
         SegmentationMode::PointClasses,
         SegmentationMode::Unspecified,
+        SegmentationMode::ClassImage,
     ] {
-        for f in [
-            &scene.frames[0].frame,
-            &scene.frames[SCENE_FRAMES as usize - 1].frame,
-        ] {
+        for recorded in [&scene.frames[0], &scene.frames[SCENE_FRAMES as usize - 1]] {
+            let mut f = recorded.frame.clone();
+            if m == SegmentationMode::ClassImage {
+                f.class_image.clone_from(&recorded.labels);
+            }
             let got = client
                 .detect_with(f.clone(), Some(mode(m)))
                 .await
                 .expect("detect");
-            let want = in_process(server.reference(), f, &mode(m)).expect("in process");
+            let want = in_process(server.reference(), &f, &mode(m)).expect("in process");
             assert_eq!(
                 untimed(got),
                 untimed(want),

@@ -33,7 +33,7 @@ pub struct EvalArgs {
     #[arg(long, default_value = "eval-out")]
     pub out: PathBuf,
     /// Modes to compare: geometry (no classes), model (the server's segmentation), truth (the
-    /// cloud's class field).
+    /// recording's true label image sent as the class image: perfect segmentation).
     #[arg(long, value_delimiter = ',', default_value = "geometry,model,truth", value_parser = parse_mode)]
     pub modes: Vec<Mode>,
     /// Modes in which any unsafe site fails the run (exit code 7).
