@@ -187,6 +187,17 @@ impl ObstacleRays {
                 .clamp(0.0, MAX_OBSTACLE_HEIGHT_M.min(camera_height));
             // Where the ray is `height` above the plane, dropped onto the plane.
             let under = self.origin + ray * (t - height / cos) - n * height;
+            // Most obstacle pixels (streets, walls, other roofs) sweep nowhere near the region:
+            // skip them on the bounding box of the whole sweep.
+            let lo = hit.coords.inf(&under.coords);
+            let hi = hit.coords.sup(&under.coords);
+            if hi.x + radius < bounds[0]
+                || hi.y + radius < bounds[1]
+                || lo.x - radius > bounds[2]
+                || lo.y - radius > bounds[3]
+            {
+                continue;
+            }
             let sweep = under - hit;
             let steps = ((sweep.norm() / radius).ceil() as usize).min(MAX_SWEEP_DISKS);
             for k in 0..=steps {
@@ -305,5 +316,46 @@ mod tests {
         // sweeps nothing back: one disk per block.
         let below = footprint(&[[6.92, 0.0, 1.0]]);
         assert_eq!(below.len(), rays.len());
+    }
+
+    #[test]
+    fn bounds_only_leave_out_disks_that_miss_them() {
+        // Seeded obstacles all over the image, some with tall LiDAR points: the disks returned
+        // for any bounds are exactly those of the unbounded footprint that reach into them.
+        let camera = nadir_camera_at(20.0);
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move |n: u64| {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            (state >> 33) % n
+        };
+        let mut data = vec![4u8; 100 * 80];
+        for _ in 0..300 {
+            data[next(8000) as usize] = 7 + next(5) as u8;
+        }
+        let mask = ClassMask::new(100, 80, data).unwrap();
+        let points: Vec<[f32; 3]> = (0..60)
+            .map(|_| {
+                let (x, y) = (next(40) as f32 - 20.0, next(30) as f32 - 15.0);
+                [x, y, 5.0 + next(8) as f32]
+            })
+            .collect();
+        let rays = ObstacleRays::new(&camera, &mask, &points, |c| c != 4);
+        let everything = [-1e6, -1e6, 1e6, 1e6];
+        let all = rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], everything);
+        assert!(all.len() > rays.len(), "some blocks sweep");
+        for _ in 0..50 {
+            let (x, y) = (next(40) as f64 - 20.0, next(30) as f64 - 15.0);
+            let b = [x, y, x + next(10) as f64, y + next(10) as f64];
+            let reaching: Vec<_> = all
+                .iter()
+                .copied()
+                .filter(|([cx, cy], r)| {
+                    cx + r >= b[0] && cy + r >= b[1] && cx - r <= b[2] && cy - r <= b[3]
+                })
+                .collect();
+            assert_eq!(rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], b), reaching);
+        }
     }
 }

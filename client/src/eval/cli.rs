@@ -55,6 +55,9 @@ pub struct EvalArgs {
     /// At most this many sites per frame. Unset: the server's default.
     #[arg(long)]
     pub max_sites: Option<u32>,
+    /// l_max sent with every frame: longest triangle edge, metres. Unset: the server's default.
+    #[arg(long)]
+    pub max_triangle_edge: Option<f64>,
     /// Also draw every frame top-down into `<out>/frames/` (frames with an unsafe site always are).
     #[arg(long)]
     pub overlays: bool,
@@ -177,6 +180,7 @@ pub async fn eval_cmd(
         options: PipelineOptions {
             polylabel_precision_m: args.polylabel_precision,
             max_sites: args.max_sites,
+            max_triangle_edge_m: args.max_triangle_edge,
             ..Default::default()
         },
         metrics: super::MetricsParams {
