@@ -431,6 +431,13 @@ fn load_frame(path: &Path, index: usize, pipeline: &PipelineArgs) -> Result<Fram
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if is_ply {
+        if pipeline.segmentation == Segmentation::ClassImage {
+            return Err(usage(format!(
+                "--segmentation class-image sends a recording's label images; {} is a PLY scan \
+                 without one",
+                path.display()
+            )));
+        }
         let ply = landing_sim::ply::read(path).map_err(|e| match e {
             landing_sim::ply::PlyError::Io { source, .. } => ClientError::io(path, source),
             other => ClientError::Recording {
@@ -1102,6 +1109,36 @@ mod tests {
         assert_eq!(o.max_triangle_edge_m, Some(3.5));
         assert_eq!(o.max_sites, Some(2));
         assert_eq!(o.min_normal_dot, None);
+    }
+
+    #[test]
+    fn class_image_mode_sends_the_recorded_labels() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let args = |input: &str| {
+            let cli =
+                Cli::try_parse_from(["landing", "detect", input, "--segmentation", "class-image"])
+                    .unwrap();
+            let Command::Detect(a) = cli.command else {
+                panic!("not detect")
+            };
+            a
+        };
+        let mcap = root.join("samples/rooftops.mcap");
+        let a = args(mcap.to_str().unwrap());
+        let frame = load_frame(&a.input, 2, &a.pipeline).unwrap();
+        let labels = read_frames(&mcap).unwrap()[2].labels.clone();
+        assert!(labels.is_some());
+        assert_eq!(frame.class_image, labels);
+        // Other modes send the frame as recorded.
+        let mut plain = a.pipeline.clone();
+        plain.segmentation = Segmentation::Model;
+        assert_eq!(load_frame(&a.input, 2, &plain).unwrap().class_image, None);
+        // A PLY scan has no labels to send.
+        let ply = root.join("samples/roof.ply");
+        let a = args(ply.to_str().unwrap());
+        let e = load_frame(&a.input, 0, &a.pipeline).unwrap_err();
+        assert_eq!(e.code, exit::USAGE);
+        assert!(e.message.contains("PLY"), "{}", e.message);
     }
 
     #[test]
