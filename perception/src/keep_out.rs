@@ -87,20 +87,23 @@ impl ObstacleRays {
                 *cell = Some(p);
             }
         }
-        let top_near = |x: usize, y: usize| {
-            let (cx, cy) = (x / CELL, y / CELL);
-            let mut top: Option<Point3<f64>> = None;
-            for ny in cy.saturating_sub(1)..(cy + 2).min(cells_y) {
-                for nx in cx.saturating_sub(1)..(cx + 2).min(cells_x) {
-                    if let Some(p) = highest[ny * cells_x + nx]
-                        && top.is_none_or(|t| p.z > t.z)
-                    {
-                        top = Some(p);
+        // The highest of the 3 × 3 cells around each cell: what every block of that cell sees.
+        let near: Vec<Option<Point3<f64>>> = (0..cells_x * cells_y)
+            .map(|i| {
+                let (cx, cy) = (i % cells_x, i / cells_x);
+                let mut top: Option<Point3<f64>> = None;
+                for ny in cy.saturating_sub(1)..(cy + 2).min(cells_y) {
+                    for nx in cx.saturating_sub(1)..(cx + 2).min(cells_x) {
+                        if let Some(p) = highest[ny * cells_x + nx]
+                            && top.is_none_or(|t| p.z > t.z)
+                        {
+                            top = Some(p);
+                        }
                     }
                 }
-            }
-            top
-        };
+                top
+            })
+            .collect();
 
         let rotation = camera.pose.rotation;
         let data = mask.as_slice();
@@ -120,7 +123,7 @@ impl ObstacleRays {
                     1.0,
                 );
                 rays.push(rotation * d.normalize());
-                tops.push(top_near(bx, by));
+                tops.push(near[(by / CELL) * cells_x + bx / CELL]);
             }
         }
         Self {
