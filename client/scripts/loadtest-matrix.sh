@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Load-test matrix: `landing loadtest` throughput and latency for 1, 2, 4, 8, 16 streams with
-# segmentation on (the server's model) and off (geometry only), against a release server started
+# segmentation by the server's model, by the recording's label images sent as class images (a
+# drone that segments on board), and off (geometry only), against a release server started
 # here. Prints one Markdown table row per run; the JSON summaries go to $OUT_DIR.
 #
 #   cargo build --release -p landing-server -p landing-client
@@ -28,7 +29,7 @@ done
 
 echo "| segmentation | streams | frames/s | p50 ms | p95 ms | p99 ms | outcomes | exactly once |"
 echo "|---|---:|---:|---:|---:|---:|---|---|"
-for seg in model none; do
+for seg in model class-image none; do
   for n in $STREAMS; do
     json="$OUT_DIR/$seg-$n.json"
     "$LANDING" --server "http://127.0.0.1:$PORT" loadtest "$REC" --streams "$n" --duration "$DURATION" \
