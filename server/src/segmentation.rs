@@ -177,7 +177,9 @@ pub fn classify_with_mask(
 /// Decodes the frame's image and checks it against the calibration's size.
 pub fn decode(camera: &CameraImage) -> Result<RgbImage, Error> {
     const IMAGE: &str = "frame.image";
-    let image = decode_image(image_data(camera)).map_err(|e| input_error(IMAGE, camera, &e))?;
+    let image = image_data(camera)
+        .and_then(decode_image)
+        .map_err(|e| input_error(IMAGE, camera, &e))?;
     check_size(IMAGE, camera, image.width(), image.height())?;
     Ok(image)
 }
@@ -185,16 +187,17 @@ pub fn decode(camera: &CameraImage) -> Result<RgbImage, Error> {
 /// Decodes the frame's class image and checks it against its calibration's size.
 pub fn decode_classes(camera: &CameraImage) -> Result<ClassMask, Error> {
     const IMAGE: &str = "frame.class_image";
-    let mask = decode_class_mask(image_data(camera)).map_err(|e| input_error(IMAGE, camera, &e))?;
+    let mask = image_data(camera)
+        .and_then(decode_class_mask)
+        .map_err(|e| input_error(IMAGE, camera, &e))?;
     check_size(IMAGE, camera, mask.width(), mask.height())?;
     Ok(mask)
 }
 
-/// The pixels as perception takes them (the format was checked with the frame).
-fn image_data(camera: &CameraImage) -> ImageData<'_> {
-    match &camera.pixels {
-        ImagePixels::Encoded { format, data } if format == "jpeg" => ImageData::Jpeg(data),
-        ImagePixels::Encoded { data, .. } => ImageData::Png(data),
+/// The pixels as perception takes them.
+fn image_data(camera: &CameraImage) -> Result<ImageData<'_>, PerceptionError> {
+    Ok(match &camera.pixels {
+        ImagePixels::Encoded { format, data } => ImageData::compressed(format, data)?,
         &ImagePixels::Rgb8 {
             width,
             height,
@@ -217,7 +220,7 @@ fn image_data(camera: &CameraImage) -> ImageData<'_> {
             step,
             data,
         },
-    }
+    })
 }
 
 /// The field holding the pixels of `image`: `<image>.compressed.data` or `<image>.raw.data`.
