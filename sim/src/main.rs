@@ -46,6 +46,30 @@ impl Assets {
     }
 }
 
+/// The LiDAR's sampling; the defaults are the paper's sensor (16 beams, 100,000 points/s).
+#[derive(clap::Args)]
+struct LidarArgs {
+    /// Laser beams, spread evenly over the vertical field of view.
+    #[arg(long, default_value_t = LidarConfig::default().beams,
+          value_parser = clap::value_parser!(u32).range(2..=256))]
+    lidar_beams: u32,
+    /// Points per second over all beams (one rotation per frame at the rotation rate).
+    #[arg(long, default_value_t = LidarConfig::default().points_per_second)]
+    lidar_points_per_second: f64,
+}
+
+impl LidarArgs {
+    fn config(&self) -> anyhow::Result<LidarConfig> {
+        let config = LidarConfig {
+            beams: self.lidar_beams,
+            points_per_second: self.lidar_points_per_second,
+            ..Default::default()
+        };
+        config.validate().context("--lidar-points-per-second")?;
+        Ok(config)
+    }
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Write an image/label dataset (PNG pairs + manifest.csv/manifest.json).
@@ -100,6 +124,8 @@ enum Command {
         end_altitude: f64,
         #[arg(long, default_value = "sim-1")]
         drone_id: String,
+        #[command(flatten)]
+        lidar: LidarArgs,
     },
     /// Write one LiDAR scan of a roof with obstacles as a PLY file in world coordinates.
     Ply {
@@ -113,6 +139,8 @@ enum Command {
         /// Roof to scan (default: the one with the most assets).
         #[arg(long)]
         building: Option<usize>,
+        #[command(flatten)]
+        lidar: LidarArgs,
     },
     /// Write the `landing eval` scenario set: approach flights to many buildings of
     /// Manhattan-distribution worlds (seeds seed, seed+1, ...), one MCAP per building, buildings
@@ -135,6 +163,8 @@ enum Command {
         width: u32,
         #[arg(long, default_value_t = 240)]
         height: u32,
+        #[command(flatten)]
+        lidar: LidarArgs,
     },
     /// Render one view (image and colourised labels side by side) to a PNG.
     Preview {
@@ -208,6 +238,7 @@ fn main() -> anyhow::Result<()> {
             start_altitude,
             end_altitude,
             drone_id,
+            lidar,
         } => {
             let config = RecordConfig {
                 seed,
@@ -226,6 +257,7 @@ fn main() -> anyhow::Result<()> {
                     hfov_deg: hfov,
                     ..Default::default()
                 },
+                lidar: lidar.config()?,
                 building,
                 drone_id,
                 ..Default::default()
@@ -246,6 +278,7 @@ fn main() -> anyhow::Result<()> {
             out,
             altitude,
             building,
+            lidar,
         } => {
             let world = World::generate(seed, &WorldConfig::default())?;
             let b = building.unwrap_or_else(|| busiest_roof(&world));
@@ -261,12 +294,7 @@ fn main() -> anyhow::Result<()> {
             };
             let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
             let v = view_of(&world, b, &view, &mut rng);
-            let points = scan(
-                &world,
-                &lidar_pose(&v.camera),
-                &LidarConfig::default(),
-                seed,
-            )?;
+            let points = scan(&world, &lidar_pose(&v.camera), &lidar.config()?, seed)?;
             write_recording_ply(&points, &out)?;
             let roof = points.iter().filter(|p| p.building as usize == b).count();
             println!(
@@ -284,7 +312,9 @@ fn main() -> anyhow::Result<()> {
             out,
             width,
             height,
+            lidar,
         } => {
+            let lidar = lidar.config()?;
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             let start = Instant::now();
             let (mut files, mut total) = (0usize, 0usize);
@@ -315,6 +345,7 @@ fn main() -> anyhow::Result<()> {
                         },
                         width,
                         height,
+                        lidar,
                         building: Some(b),
                         drone_id: format!("w{world_seed}-b{b}"),
                         ..Default::default()
@@ -377,4 +408,39 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scenarios(extra: &[&str]) -> Result<LidarArgs, clap::Error> {
+        let args = ["landing-sim", "scenarios", "--out", "x"]
+            .iter()
+            .chain(extra);
+        match Cli::try_parse_from(args)?.command {
+            Command::Scenarios { lidar, .. } => Ok(lidar),
+            _ => unreachable!("parsed another subcommand"),
+        }
+    }
+
+    #[test]
+    fn lidar_flags_default_to_the_papers_sensor_and_name_themselves_when_wrong() {
+        assert_eq!(
+            scenarios(&[]).unwrap().config().unwrap(),
+            LidarConfig::default()
+        );
+        let dense = scenarios(&["--lidar-beams", "64", "--lidar-points-per-second", "4e5"]);
+        let dense = dense.unwrap().config().unwrap();
+        assert_eq!((dense.beams, dense.points_per_second), (64, 4e5));
+
+        let beams = scenarios(&["--lidar-beams", "1"])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(beams.contains("--lidar-beams"), "{beams}");
+        let rate = scenarios(&["--lidar-points-per-second", "10"]).unwrap();
+        let rate = format!("{:#}", rate.config().unwrap_err());
+        assert!(rate.contains("--lidar-points-per-second"), "{rate}");
+    }
 }

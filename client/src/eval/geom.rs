@@ -177,6 +177,30 @@ pub fn convex_hull(points: &[P2]) -> Vec<P2> {
     hull
 }
 
+/// The part of the horizontal plane at height `plane_z` that a vertical prism standing on it
+/// hides from the point `eye`: the prism is the convex `base` (a polygon, or a wall's two end
+/// points) raised `height` metres. Its shadow under a point light at `eye` is the convex hull of
+/// the base and of the top projected from `eye` onto the plane. An eye at or below the top would
+/// make the shadow unbounded; it is then cut at 1000 times the eye's distance. `None` when the
+/// eye is not above the plane (it sees none of it).
+pub fn prism_shadow(eye: [f64; 3], plane_z: f64, base: &[P2], height: f64) -> Option<Vec<P2>> {
+    let above_plane = eye[2] - plane_z;
+    if above_plane.is_nan() || above_plane <= 0.0 {
+        return None;
+    }
+    let above_top = (above_plane - height).max(above_plane * 1e-3);
+    let scale = above_plane / above_top;
+    let top = base.iter().map(|p| {
+        [
+            eye[0] + (p[0] - eye[0]) * scale,
+            eye[1] + (p[1] - eye[1]) * scale,
+        ]
+    });
+    Some(convex_hull(
+        &base.iter().copied().chain(top).collect::<Vec<_>>(),
+    ))
+}
+
 /// A regular grid of square cells; cell `(i, j)` has its centre at
 /// `(x0 + (i + 0.5) * cell_m, y0 + (j + 0.5) * cell_m)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -449,6 +473,33 @@ fn distance_transform_1d(f: &[f64], out: &mut [f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_prism_hides_the_plane_behind_it_as_far_as_similar_triangles_say() {
+        // Eye 10 m above the plane, 10 m west of a 2 × 2 m box 2 m tall: the box's far face at
+        // x = 12 projects to x = 12 * 10 / 8 = 15, its near face to 11 * 10 / 8 = 13.75.
+        let eye = [0.0, 1.0, 10.0];
+        let base = [[10.0, 0.0], [12.0, 0.0], [12.0, 2.0], [10.0, 2.0]];
+        let shadow = prism_shadow(eye, 0.0, &base, 2.0).unwrap();
+        let area = signed_area(&shadow).abs();
+        let (lo, hi) = bounds_of(&shadow).unwrap();
+        assert!(
+            (hi[0] - 15.0).abs() < 1e-9 && (lo[0] - 10.0).abs() < 1e-9,
+            "{shadow:?}"
+        );
+        // The 5 × 2.5 m box of the hull, less two 2.5 × 0.25 m corner triangles.
+        assert!((area - (12.5 - 2.0 * 0.3125)).abs() < 1e-9, "{area}");
+        // Straight above its centre the box's top, seen in perspective, overhangs the footprint
+        // by a quarter on every side: 2.5 × 2.5 m hidden.
+        let over = prism_shadow([11.0, 1.0, 10.0], 0.0, &base, 2.0).unwrap();
+        assert!((signed_area(&over).abs() - 6.25).abs() < 1e-9, "{over:?}");
+        // A wall (two end points) hides a band; an eye under the plane sees none of it.
+        let wall = prism_shadow(eye, 0.0, &[[10.0, 0.0], [10.0, 2.0]], 1.0).unwrap();
+        // A trapezoid 100/9 - 10 m deep, from 2 m wide at the wall to 20/9 m.
+        let band = (100.0 / 9.0 - 10.0) * (2.0 + 20.0 / 9.0) / 2.0;
+        assert!((signed_area(&wall).abs() - band).abs() < 1e-9, "{wall:?}");
+        assert!(prism_shadow([0.0, 0.0, -1.0], 0.0, &base, 2.0).is_none());
+    }
 
     fn square(c: P2, half: f64) -> Vec<P2> {
         vec![

@@ -64,6 +64,10 @@ pub struct RoofTruth {
     pub obstacles: Vec<Obstacle>,
     /// The part of the roof the scan covered; `None` means all of it.
     pub scanned: Option<Polygon2>,
+    /// Parts of the roof hidden from the sensor behind obstacles and the parapet (their shadows
+    /// under a light at the sensor). No method can know what is there from this frame; the
+    /// line-of-sight scores leave them out.
+    pub hidden: Vec<Polygon2>,
     /// The best landing radius the recording's ground truth states, when it has one (kept to
     /// cross-check the raster optimum).
     pub stated_best_radius_m: Option<f64>,
@@ -159,6 +163,15 @@ pub struct RoofEval {
     pub radius_ratio: f64,
     /// IoU of the returned polygons with the true landable area (0 when nothing was returned).
     pub iou: f64,
+    /// The true landable area in the sensor's line of sight (less [`RoofTruth::hidden`]),
+    /// square metres.
+    pub visible_area_m2: f64,
+    /// Radius of the largest circle in that area.
+    pub visible_radius_m: f64,
+    /// `best_safe_radius_m / visible_radius_m` (0 when nothing is visible).
+    pub visible_radius_ratio: f64,
+    /// IoU of the returned polygons with that area.
+    pub visible_iou: f64,
 }
 
 /// What happened to one obstacle.
@@ -306,6 +319,13 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
         if !roof.scored || truth_radius < params.min_truth_radius_m {
             continue;
         }
+        let mut visible = truth.clone();
+        let mut hidden = Mask::empty(grid);
+        for h in &roof.hidden {
+            hidden.add_polygon(h);
+        }
+        visible.and_not(&hidden);
+        let visible_radius = visible.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
         let best_safe = on_roof
             .iter()
             .filter(|&&k| out.sites[k].verdict.is_safe())
@@ -322,6 +342,14 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
             best_safe_radius_m: best_safe,
             radius_ratio: best_safe / truth_radius,
             iou: truth.iou(&returned).unwrap_or(0.0),
+            visible_area_m2: visible.area(),
+            visible_radius_m: visible_radius,
+            visible_radius_ratio: if visible_radius > 0.0 {
+                best_safe / visible_radius
+            } else {
+                0.0
+            },
+            visible_iou: visible.iou(&returned).unwrap_or(0.0),
         });
     }
     out
@@ -344,6 +372,7 @@ mod tests {
                 seen: true,
             }],
             scanned: None,
+            hidden: vec![],
             stated_best_radius_m: None,
             scored: true,
             target: true,
@@ -464,6 +493,39 @@ mod tests {
         assert!(
             (iou - (19.4 * 9.4 - 4.0) / (19.4 * 9.4)).abs() < 0.01,
             "{iou}"
+        );
+    }
+
+    #[test]
+    fn line_of_sight_scores_leave_out_what_the_sensor_could_not_see() {
+        // The right half (x > 10) lies in a shadow; the answer covers exactly the left half
+        // (less the AC unit) with the best circle there.
+        let mut r = roof();
+        r.hidden = vec![Polygon2::rect([10.0, -1.0], [21.0, 11.0])];
+        let polygon = Polygon2 {
+            shell: Polygon2::rect([0.3, 0.3], [10.0, 9.7]).shell,
+            holes: vec![r.obstacles[0].footprint.shell.clone()],
+        };
+        let s = site([8.0, 5.0], 2.0, polygon);
+        let e = evaluate_frame(&[s], &[r], &MetricsParams::default());
+        let roof = &e.roofs[0];
+        assert!((roof.visible_iou - 1.0).abs() < 0.01, "{roof:?}");
+        assert!(roof.iou < 0.5, "{roof:?}");
+        assert!(
+            (roof.visible_area_m2 - (9.7 * 9.4 - 4.0)).abs() < 0.2,
+            "{roof:?}"
+        );
+        // The truth's best circle is in the hidden half; the visible half, 9.4 m tall with the
+        // AC unit in it, holds circles of about 2.2 m.
+        assert!((roof.truth_radius_m - 4.7).abs() < 0.06, "{roof:?}");
+        assert!(
+            roof.visible_radius_m > 2.0 && roof.visible_radius_m < 2.5,
+            "{roof:?}"
+        );
+        let ratio = 2.0 / roof.visible_radius_m;
+        assert!(
+            (roof.visible_radius_ratio - ratio).abs() < 1e-12,
+            "{roof:?}"
         );
     }
 

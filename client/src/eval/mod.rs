@@ -24,6 +24,7 @@
 //!     height_m: 30.0,
 //!     obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
 //!     scanned: None,
+//!     hidden: vec![],
 //!     stated_best_radius_m: None,
 //!     scored: true,
 //!     target: true,

@@ -134,6 +134,7 @@ mod tests {
                 seen: true,
             }],
             scanned: None,
+            hidden: vec![],
             stated_best_radius_m: None,
             scored: true,
             target: true,

@@ -144,6 +144,11 @@ pub struct ModeSummary {
     /// Bootstrap 95 % interval of the median radius ratio.
     pub ratio_median_ci: Option<(f64, f64)>,
     pub ratio: Option<MeanCi>,
+    /// Target IoU against the landable area in the sensor's line of sight (what the scan could
+    /// have shown: shadows of obstacles and parapets left out).
+    pub visible_iou: Option<MeanCi>,
+    /// Median target radius ratio against the best circle in that area.
+    pub visible_ratio_median: Option<f64>,
     pub classes: Vec<ClassSummary>,
     /// Per hard-case tag, in name order.
     pub tags: Vec<TagSummary>,
@@ -250,12 +255,16 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
             ratio_median: None,
             ratio_median_ci: None,
             ratio: None,
+            visible_iou: None,
+            visible_ratio_median: None,
             classes: Vec::new(),
             tags: Vec::new(),
             steps: Vec::new(),
             round_trip: None,
         };
         let mut ious = Vec::new();
+        let mut visible_ious = Vec::new();
+        let mut visible_ratios = Vec::new();
         let mut ratios = Vec::new();
         let mut ious_all = Vec::new();
         let mut ratios_all = Vec::new();
@@ -298,6 +307,8 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
                 }
                 ious.push(roof.iou);
                 ratios.push(roof.radius_ratio);
+                visible_ious.push(roof.visible_iou);
+                visible_ratios.push(roof.visible_radius_ratio);
             }
             for o in &r.eval.obstacles {
                 let e = classes.entry(o.class).or_default();
@@ -312,6 +323,8 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
         s.iou_median = median(&ious);
         s.ratio = mean_ci95(&ratios);
         s.ratio_median = median(&ratios);
+        s.visible_iou = mean_ci95(&visible_ious);
+        s.visible_ratio_median = median(&visible_ratios);
         s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| {
             median(x).unwrap_or(f64::NAN)
         });
@@ -444,6 +457,12 @@ impl Summary {
                 (v, _) => opt(v, 3),
             }),
             row("target radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
+            row("  against the line-of-sight area: IoU, mean", &|m| {
+                ci(m.visible_iou, 3)
+            }),
+            row("  against the line-of-sight area: ratio, median", &|m| {
+                opt(m.visible_ratio_median, 3)
+            }),
             row("all roofs in view scored", &|m| m.roofs_all.to_string()),
             row("all roofs: polygon IoU, mean [95% CI]", &|m| {
                 ci(m.iou_all, 3)
@@ -897,6 +916,10 @@ mod tests {
                     best_safe_radius_m: if verdict.is_safe() { 3.0 } else { 0.0 },
                     radius_ratio: ratio,
                     iou,
+                    visible_area_m2: 80.0,
+                    visible_radius_m: 3.5,
+                    visible_radius_ratio: ratio * 4.0 / 3.5,
+                    visible_iou: iou,
                 }],
                 obstacles: vec![ObstacleEval {
                     roof: 0,

@@ -301,6 +301,7 @@ mod tests {
             height_m: 20.0,
             obstacles: vec![],
             scanned: None,
+            hidden: vec![],
             stated_best_radius_m: None,
             scored: true,
             target: true,

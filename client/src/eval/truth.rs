@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use landing_proto::v1::{CameraImage, Frame, GroundTruth, LinearRing, SemanticClass};
 
-use super::geom::{P2, Polygon2, bounds_of};
+use super::geom::{P2, Polygon2, bounds_of, prism_shadow};
 use super::metrics::{Obstacle, RoofTruth};
 use super::run::Scenario;
 use crate::ClientError;
@@ -57,6 +57,7 @@ pub fn scenario_of(
 ) -> Scenario {
     let mut roofs = Vec::new();
     let mut raised = Vec::new();
+    let eye = sensor_position(&frame);
     for (k, r) in truth.roofs.iter().enumerate() {
         let outline = Polygon2::simple(ring(r.outline.as_ref()));
         let landable = r
@@ -68,6 +69,7 @@ pub fn scenario_of(
             })
             .unwrap_or_default();
         let interior = interior_of(&outline, &landable, r.parapet_height_m);
+        let hidden = eye.map_or_else(Vec::new, |eye| hidden_parts(eye, r, &interior));
         let obstacles: Vec<Obstacle> = r
             .obstacles
             .iter()
@@ -87,6 +89,7 @@ pub fn scenario_of(
                     height_m: r.height_m + o.height_m,
                     obstacles: vec![],
                     scanned: None,
+                    hidden: vec![],
                     stated_best_radius_m: None,
                     scored: false,
                     target: false,
@@ -101,6 +104,7 @@ pub fn scenario_of(
             obstacles,
             // The simulator's scanned region: interior ∩ convex hull of the scan on this roof.
             scanned: (landable.shell.len() >= 3).then_some(landable),
+            hidden,
             stated_best_radius_m: Some(r.best_safe_radius_m),
             scored: true,
             // The ground truth lists the approached roof first.
@@ -115,6 +119,43 @@ pub fn scenario_of(
         labels,
         roofs,
     }
+}
+
+/// The LiDAR's origin in the world, where the frame's cloud has a pose.
+fn sensor_position(frame: &Frame) -> Option<[f64; 3]> {
+    let pose = frame.point_cloud.as_ref()?.pose.as_ref()?;
+    Some(crate::RigidTransform::from_pose(pose).apply([0.0; 3]))
+}
+
+/// The shadows, under a light at `eye`, of a roof's obstacles (solid boxes on their footprints:
+/// a water tower's legs are taken as solid too, which hides a little more than they do) and of
+/// its parapet (a wall of the parapet's height on every edge of the walkable roof). An eye below
+/// the roof sees none of it.
+fn hidden_parts(
+    eye: [f64; 3],
+    roof: &landing_proto::v1::RoofTruth,
+    interior: &Polygon2,
+) -> Vec<Polygon2> {
+    let z = roof.height_m;
+    let obstacles = roof
+        .obstacles
+        .iter()
+        .map(|o| (ring(o.footprint.as_ref()), o.height_m));
+    let n = interior.shell.len();
+    let walls = (0..n).map(|i| {
+        let wall = vec![interior.shell[i], interior.shell[(i + 1) % n]];
+        (wall, roof.parapet_height_m)
+    });
+    let walls = walls.filter(|_| roof.parapet_height_m > 0.0);
+    let mut out = Vec::new();
+    for (base, height) in obstacles.chain(walls) {
+        match prism_shadow(eye, z, &base, height) {
+            Some(shadow) if shadow.len() >= 3 => out.push(Polygon2::simple(shadow)),
+            Some(_) => {}
+            None => return vec![interior.clone()],
+        }
+    }
+    out
 }
 
 /// Hard-case tags of a frame, from its target roof (the first) and the roofs around it.
