@@ -457,10 +457,10 @@ impl Summary {
                 (v, _) => opt(v, 3),
             }),
             row("target radius ratio, mean [95% CI]", &|m| ci(m.ratio, 3)),
-            row("  against the line-of-sight area: IoU, mean", &|m| {
+            row("target IoU, line of sight, mean [95% CI]", &|m| {
                 ci(m.visible_iou, 3)
             }),
-            row("  against the line-of-sight area: ratio, median", &|m| {
+            row("target radius ratio, line of sight, median", &|m| {
                 opt(m.visible_ratio_median, 3)
             }),
             row("all roofs in view scored", &|m| m.roofs_all.to_string()),
