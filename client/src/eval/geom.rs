@@ -476,8 +476,8 @@ mod tests {
 
     #[test]
     fn a_prism_hides_the_plane_behind_it_as_far_as_similar_triangles_say() {
-        // Eye 10 m above the plane, 10 m west of a 2 × 2 m box 2 m tall: the box's far face at
-        // x = 12 projects to x = 12 * 10 / 8 = 15, its near face to 11 * 10 / 8 = 13.75.
+        // Eye 10 m above the plane, 10 m west of a 2 × 2 m box 2 m tall: the top's far edge at
+        // x = 12 projects to x = 12 * 10 / 8 = 15, its near edge to 10 * 10 / 8 = 12.5.
         let eye = [0.0, 1.0, 10.0];
         let base = [[10.0, 0.0], [12.0, 0.0], [12.0, 2.0], [10.0, 2.0]];
         let shadow = prism_shadow(eye, 0.0, &base, 2.0).unwrap();

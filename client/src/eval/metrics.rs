@@ -499,7 +499,7 @@ mod tests {
     #[test]
     fn line_of_sight_scores_leave_out_what_the_sensor_could_not_see() {
         // The right half (x > 10) lies in a shadow; the answer covers exactly the left half
-        // (less the AC unit) with the best circle there.
+        // (less the AC unit), with a 2 m circle.
         let mut r = roof();
         r.hidden = vec![Polygon2::rect([10.0, -1.0], [21.0, 11.0])];
         let polygon = Polygon2 {
