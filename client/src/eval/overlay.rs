@@ -1,6 +1,7 @@
 //! A top-down picture of one frame's answer over its ground truth, to explain a verdict: roofs in
-//! grey, the true landable area in green, obstacle footprints in red, returned landing polygons
-//! in blue, safe circles in dark blue and unsafe ones in magenta.
+//! grey, the true landable area in green (pale olive where the sensor could not see it), obstacle
+//! footprints in red, returned landing polygons in blue, safe circles in dark blue and unsafe ones
+//! in magenta.
 
 use image::Rgb;
 
@@ -41,12 +42,19 @@ pub fn draw_overlay(
     let layers: Vec<(Mask, Rgb<u8>)> = {
         let mut roof = Mask::empty(grid);
         let mut landable = Mask::empty(grid);
+        let mut hidden = Mask::empty(grid);
         let mut obstacles = Mask::empty(grid);
         for r in roofs {
             roof.add_polygon(&r.outline);
             if r.scored {
                 let m = landable_mask(grid, r);
+                let mut unseen = Mask::empty(grid);
+                for h in &r.hidden {
+                    unseen.add_polygon(h);
+                }
+                unseen.and(&m);
                 landable.or(&m);
+                hidden.or(&unseen);
             }
             for o in &r.obstacles {
                 obstacles.add_polygon(&o.footprint);
@@ -55,6 +63,7 @@ pub fn draw_overlay(
         vec![
             (roof, Rgb([205, 205, 205])),
             (landable, Rgb([170, 225, 160])),
+            (hidden, Rgb([205, 215, 165])),
             (obstacles, Rgb([225, 80, 70])),
         ]
     };
