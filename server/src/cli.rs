@@ -237,10 +237,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .build()
                 .context("start the async runtime")?;
             runtime.block_on(async move {
+                let shutdown = crate::server::shutdown_signal()?;
                 let listener = tokio::net::TcpListener::bind(config.listen_addr()?)
                     .await
                     .with_context(|| format!("bind server.listen {}", config.server.listen))?;
-                crate::server::serve(config, listener, crate::server::shutdown_signal()).await
+                crate::server::serve(config, listener, shutdown).await
             })
         }
     }

@@ -73,3 +73,22 @@ async fn sigterm_drains_and_exits_zero() {
         "{log}"
     );
 }
+
+#[tokio::test]
+async fn the_shutdown_handlers_are_installed_before_the_future_is_polled() {
+    // The server announces itself before its shutdown future is first polled. The handlers
+    // were once installed on that first poll, and a SIGTERM in between killed the process with
+    // the default action (exit by signal 15, seen in CI). Here that would kill this test.
+    let shutdown = landing_server::server::shutdown_signal().unwrap();
+    let pid = std::process::id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    tokio::time::timeout(Duration::from_secs(5), shutdown)
+        .await
+        .expect("the SIGTERM sent before the first poll was not seen");
+}
