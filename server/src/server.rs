@@ -75,9 +75,9 @@ pub async fn serve(
     running.wait().await
 }
 
-/// A future that resolves on SIGTERM or SIGINT (Ctrl-C). The handlers are installed by this call,
-/// not when the future is first polled: a signal that arrives just after the server announces
-/// itself must drain it, not kill the process with the default action.
+/// A future that resolves on SIGTERM or SIGINT (Ctrl-C). On Unix the handlers are installed by
+/// this call, not when the future is first polled: a signal that arrives just after the server
+/// announces itself must drain it, not kill the process with the default action.
 pub fn shutdown_signal() -> anyhow::Result<impl Future<Output = ()> + Send + 'static> {
     #[cfg(unix)]
     {
