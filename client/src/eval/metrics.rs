@@ -265,6 +265,15 @@ pub fn landable_mask(grid: Grid, roof: &RoofTruth) -> Mask {
     m
 }
 
+/// The part of a roof hidden from the sensor ([`RoofTruth::hidden`]) on `grid`.
+pub fn hidden_mask(grid: Grid, roof: &RoofTruth) -> Mask {
+    let mut m = Mask::empty(grid);
+    for h in &roof.hidden {
+        m.add_polygon(h);
+    }
+    m
+}
+
 /// Scores every site, roof and obstacle of one frame.
 pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParams) -> FrameEval {
     let site_evals: Vec<SiteEval> = sites.iter().map(|s| judge_site(s, roofs, params)).collect();
@@ -320,11 +329,7 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
             continue;
         }
         let mut visible = truth.clone();
-        let mut hidden = Mask::empty(grid);
-        for h in &roof.hidden {
-            hidden.add_polygon(h);
-        }
-        visible.and_not(&hidden);
+        visible.and_not(&hidden_mask(grid, roof));
         let visible_radius = visible.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
         let best_safe = on_roof
             .iter()

@@ -6,7 +6,7 @@
 use image::Rgb;
 
 use super::geom::{Grid, Mask, P2, bounds_of};
-use super::metrics::{RoofTruth, Site, SiteEval, landable_mask};
+use super::metrics::{RoofTruth, Site, SiteEval, hidden_mask, landable_mask};
 use super::plot::Canvas;
 
 const MARGIN: i64 = 20;
@@ -48,10 +48,7 @@ pub fn draw_overlay(
             roof.add_polygon(&r.outline);
             if r.scored {
                 let m = landable_mask(grid, r);
-                let mut unseen = Mask::empty(grid);
-                for h in &r.hidden {
-                    unseen.add_polygon(h);
-                }
+                let mut unseen = hidden_mask(grid, r);
                 unseen.and(&m);
                 landable.or(&m);
                 hidden.or(&unseen);

@@ -124,7 +124,7 @@ pub fn scenario_of(
 /// The LiDAR's origin in the world, where the frame's cloud has a pose.
 fn sensor_position(frame: &Frame) -> Option<[f64; 3]> {
     let pose = frame.point_cloud.as_ref()?.pose.as_ref()?;
-    Some(crate::RigidTransform::from_pose(pose).apply([0.0; 3]))
+    Some(crate::RigidTransform::from_pose(pose).translation)
 }
 
 /// The shadows, under a light at `eye`, of a roof's obstacles (solid boxes on their footprints:
@@ -141,12 +141,13 @@ fn hidden_parts(
         .obstacles
         .iter()
         .map(|o| (ring(o.footprint.as_ref()), o.height_m));
-    let n = interior.shell.len();
-    let walls = (0..n).map(|i| {
-        let wall = vec![interior.shell[i], interior.shell[(i + 1) % n]];
-        (wall, roof.parapet_height_m)
-    });
-    let walls = walls.filter(|_| roof.parapet_height_m > 0.0);
+    let shell = &interior.shell;
+    let n = if roof.parapet_height_m > 0.0 {
+        shell.len()
+    } else {
+        0
+    };
+    let walls = (0..n).map(|i| (vec![shell[i], shell[(i + 1) % n]], roof.parapet_height_m));
     let mut out = Vec::new();
     for (base, height) in obstacles.chain(walls) {
         match prism_shadow(eye, z, &base, height) {
