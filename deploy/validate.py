@@ -596,10 +596,12 @@ def check_images() -> list[str]:
             problems.append(f"deploy/{copy_name} differs from deploy/dockerignore")
     patterns = [l.strip() for l in ignore_text.splitlines() if l.strip() and not l.strip().startswith("#")]
     for needed in ("Cargo.toml", "Cargo.lock", "models/rooftop-segmentation.onnx", "deploy/config/server.toml",
-                   "deploy/extract_ort.py", "server/src/main.rs", "client/src/main.rs", "proto/landing/v1/landing.proto"):
+                   "deploy/extract_ort.py", "server/src/main.rs", "client/src/lib.rs", "cli/src/main.rs",
+                   "proto/landing/v1/landing.proto"):
         if dockerignore_excludes(patterns, needed):
             problems.append(f"deploy/dockerignore excludes {needed}, which the image build needs")
-    for secret in ("target/release/landing-server", ".venv/bin/python", ".git/config", "server.key", "deploy/k8s/examples/secret.example.yaml"):
+    for secret in ("target/release/landing-server", ".venv/bin/python", ".venvs/checks/bin/python", ".git/config",
+                   "server.key", "deploy/k8s/examples/secret.example.yaml"):
         if not dockerignore_excludes(patterns, secret):
             problems.append(f"deploy/dockerignore lets {secret} into the build context")
 
@@ -744,6 +746,7 @@ IMAGE_MUTATIONS = [
     ("Dockerfile", 'RUN ["/usr/local/bin/landing-server", "check-config"', 'RUN ["/usr/local/bin/landing-server", "detect"', "check-config"),
     ("dockerignore", "target/\n", "target/\n!models/\nmodels/\n", "excludes models/rooftop-segmentation.onnx"),
     ("dockerignore", "**/*.key\n", "", "server.key"),
+    ("dockerignore", ".venvs/\n", "", ".venvs/checks/bin/python"),
     ("Dockerfile.dockerignore", ".venv/\n", "", "differs from deploy/dockerignore"),
     ("config/server.toml", 'ort_library = ""', 'ort_library = ".ort/libonnxruntime.so"', "ort_library"),
     ("config/server.toml", "queue_capacity = 64", "queue_capacity = 32", "pipeline.queue_capacity is 32"),

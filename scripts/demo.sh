@@ -2,26 +2,29 @@
 # The main job on the embedded default: set up, build, start the service with the shipped model,
 # replay the sample recording through it (ranked sites per frame), write overlay PNGs of a few
 # frames to out/ (camera view + top-down, like the paper's Fig. 4), then stop the server.
+# Installs only what that needs: the ONNX Runtime library (scripts/setup.sh); no Python.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
+. scripts/lib.sh
 
 bash scripts/setup.sh
 export ORT_DYLIB_PATH="$root/.ort/libonnxruntime.so"
-cargo build --release --locked -p landing-server -p landing-client --bins
+cargo build --release --locked -p landing-server -p landing-cli --bins
+bin=$(release_bin_dir)  # target/release unless CARGO_TARGET_DIR or a cargo config says otherwise
 
 addr=127.0.0.1:50051
 server_pid=""
 trap '[ -n "$server_pid" ] && kill -TERM "$server_pid" 2>/dev/null; wait 2>/dev/null' EXIT
-target/release/landing-server serve --listen "$addr" --metrics-listen "" &
+"$bin/landing-server" serve --listen "$addr" --metrics-listen "" &
 server_pid=$!
-for _ in $(seq 1 150); do target/release/landing info --server "http://$addr" >/dev/null 2>&1 && break; sleep 0.2; done
+for _ in $(seq 1 150); do "$bin/landing" info --server "http://$addr" >/dev/null 2>&1 && break; sleep 0.2; done
 
-target/release/landing info --server "http://$addr"
-target/release/landing replay samples/rooftops.mcap --server "http://$addr"
+"$bin/landing" info --server "http://$addr"
+"$bin/landing" replay samples/rooftops.mcap --server "http://$addr"
 mkdir -p out
 for frame in 0 7 14; do
-  target/release/landing render samples/rooftops.mcap --frame "$frame" --server "http://$addr" --out "out/frame-$frame.png"
+  "$bin/landing" render samples/rooftops.mcap --frame "$frame" --server "http://$addr" --out "out/frame-$frame.png"
 done
 echo "overlays: out/frame-0.png out/frame-7.png out/frame-14.png"
 

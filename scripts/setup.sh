@@ -1,26 +1,9 @@
 #!/usr/bin/env bash
-# Prepares a fresh machine: the ONNX Runtime library (from the PyPI wheel) and the Python venv
-# used by the training code and the cross-language checks. Idempotent; cheap when already done.
+# Prepares a fresh machine for building and running the service: the ONNX Runtime library in
+# .ort/ (scripts/setup-ort.sh, from the PyPI wheel). Idempotent; cheap when already done.
+# Nothing Python is installed here: each command that needs Python makes its own venv under
+# .venvs/ with scripts/python-env.sh (scripts/test.sh: checks; models/training/smoke.sh: train;
+# deploy/check.sh: deploy), so the demo installs only what it needs.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-cd "$root"
-
-bash scripts/setup-ort.sh
-
-venv="$root/.venv"
-if [ ! -x "$venv/bin/python" ]; then
-  python3 -m venv "$venv"
-fi
-stamp="$venv/.requirements.sha256"
-reqs=(models/training/requirements.txt client/examples/python/requirements.txt sim/tests/python/requirements.txt deploy/requirements.txt)
-present=()
-for r in "${reqs[@]}"; do [ -f "$r" ] && present+=("$r"); done
-want=$(cat "${present[@]}" | sha256sum | cut -d' ' -f1)
-if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  "$venv/bin/python" -m pip install --quiet --upgrade pip
-  args=()
-  for r in "${present[@]}"; do args+=(-r "$r"); done
-  "$venv/bin/python" -m pip install --quiet "${args[@]}"
-  echo "$want" > "$stamp"
-fi
-echo "setup: ONNX Runtime in .ort/, Python venv in .venv/"
+bash "$root/scripts/setup-ort.sh"

@@ -3,27 +3,39 @@
 # gRPC with the real model and real recordings), then the cross-language and deployment checks:
 # the Python MCAP reader, the segmentation smoke train + ONNX parity check, a Python grpcio client,
 # the evaluation slice (fails on any unsafe site), and the deploy manifests/config/serve check.
+# Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
+# models/training/smoke.sh, deploy in deploy/check.sh.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
+. scripts/lib.sh
 
 bash scripts/setup.sh
 export ORT_DYLIB_PATH="$root/.ort/libonnxruntime.so"
-py="$root/.venv/bin/python"
 
 step() { printf '\n=== %s\n' "$*"; }
 
 step "format and lints"
 cargo fmt --all -- --check
 cargo clippy --workspace --all-targets --locked -- -D warnings
+python3 scripts/check-imports.py
+# The SDK stays light: no simulator, image codec or MCAP in its tree; no simulator in the server's.
+if cargo tree --locked -p landing-client -e normal --prefix none | grep -E '^(landing-sim|image|mcap) '; then
+  echo "landing-client depends on the crates above"; exit 1
+fi
+if cargo tree --locked -p landing-server -e normal --prefix none | grep -E '^landing-sim '; then
+  echo "landing-server depends on landing-sim"; exit 1
+fi
 
 step "Rust tests (unit, property, doc, end-to-end)"
 cargo test --workspace --locked
 
 step "release binaries"
-cargo build --release --locked -p landing-server -p landing-client -p landing-sim --bins
+cargo build --release --locked -p landing-server -p landing-cli -p landing-sim --bins
+bin=$(release_bin_dir)  # target/release unless CARGO_TARGET_DIR or a cargo config says otherwise
 
 step "independent MCAP reader (Python mcap + protobuf decoder)"
+py=$(bash scripts/python-env.sh checks sim/tests/python/requirements.txt client/examples/python/requirements.txt)
 tmp=$(mktemp -d)
 server_pid=""
 cleanup() {
@@ -31,7 +43,7 @@ cleanup() {
   rm -rf "$tmp"
 }
 trap cleanup EXIT
-target/release/landing-sim record --seed 7 --frames 12 --out "$tmp/check.mcap"
+"$bin/landing-sim" record --seed 7 --frames 12 --out "$tmp/check.mcap"
 "$py" sim/tests/python/check_mcap.py "$tmp/check.mcap"
 "$py" sim/tests/python/check_mcap.py samples/rooftops.mcap
 
@@ -39,14 +51,14 @@ step "segmentation: smoke train, export, parity with PyTorch, shipped model sign
 bash models/training/smoke.sh
 
 step "a client that is not ours (Python grpcio) and the evaluation slice, against a real server"
-target/release/landing-server serve --listen 127.0.0.1:50051 --metrics-listen "" &
+"$bin/landing-server" serve --listen 127.0.0.1:50051 --metrics-listen "" &
 server_pid=$!
-for _ in $(seq 1 150); do target/release/landing info >/dev/null 2>&1 && break; sleep 0.2; done
+for _ in $(seq 1 150); do "$bin/landing" info >/dev/null 2>&1 && break; sleep 0.2; done
 "$py" client/examples/python/detect_one_frame.py --server 127.0.0.1:50051 --recording samples/rooftops.mcap
-target/release/landing eval --scenarios small --out "$tmp/eval-small" --gate model
+"$bin/landing" eval --scenarios small --out "$tmp/eval-small" --gate model
 kill -TERM "$server_pid"; wait "$server_pid"; server_pid=""
 
 step "deployment: manifests, container recipes, shipped config, serving the sample with it"
-LANDING_BIN_DIR="$root/target/release" bash deploy/check.sh
+LANDING_BIN_DIR="$bin" bash deploy/check.sh
 
 printf '\nall checks passed\n'

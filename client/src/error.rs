@@ -13,7 +13,7 @@ pub enum ClientError {
         value: String,
         reason: String,
     },
-    /// Reading a file (certificate, recording, PLY, image) failed.
+    /// Reading a file (a certificate, a key) failed.
     #[error("cannot read `{path}`: {source}")]
     Io {
         path: String,
@@ -51,12 +51,9 @@ pub enum ClientError {
     /// The request half of a stream is closed.
     #[error("the stream is closed; frame {0} was not sent")]
     StreamClosed(u64),
-    /// A recording could not be read or written.
-    #[error("recording `{path}`: {reason}")]
-    Recording { path: String, reason: String },
-    /// An image could not be decoded or encoded.
+    /// An encoded image's header could not be read.
     #[error("image `{what}`: {reason}")]
-    Image { what: String, reason: String },
+    Image { what: &'static str, reason: String },
 }
 
 impl ClientError {

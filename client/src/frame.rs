@@ -292,14 +292,14 @@ pub fn camera_image(
 ) -> Result<CameraImage, ClientError> {
     let (size, image) = match pixels {
         ImageData::Png(data) => (
-            probe_size(&data, image::ImageFormat::Png)?,
+            png_size(&data)?,
             camera_image::Image::Compressed(CompressedImage {
                 data,
                 format: "png".into(),
             }),
         ),
         ImageData::Jpeg(data) => (
-            probe_size(&data, image::ImageFormat::Jpeg)?,
+            jpeg_size(&data)?,
             camera_image::Image::Compressed(CompressedImage {
                 data,
                 format: "jpeg".into(),
@@ -364,13 +364,71 @@ fn raw(
     ))
 }
 
-fn probe_size(data: &[u8], format: image::ImageFormat) -> Result<(u32, u32), ClientError> {
-    image::ImageReader::with_format(std::io::Cursor::new(data), format)
-        .into_dimensions()
-        .map_err(|e| ClientError::Image {
-            what: format!("{format:?}"),
-            reason: e.to_string(),
-        })
+/// Width and height from a PNG's IHDR chunk, which the format puts first.
+fn png_size(data: &[u8]) -> Result<(u32, u32), ClientError> {
+    const SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
+    let bad = |reason: &str| ClientError::Image {
+        what: "png",
+        reason: reason.to_string(),
+    };
+    if !data.starts_with(SIGNATURE) {
+        return Err(bad("no PNG signature"));
+    }
+    if data.len() < 24 || &data[12..16] != b"IHDR" {
+        return Err(bad("no IHDR chunk after the signature"));
+    }
+    let be = |at: usize| u32::from_be_bytes([data[at], data[at + 1], data[at + 2], data[at + 3]]);
+    match (be(16), be(20)) {
+        (0, _) | (_, 0) => Err(bad("IHDR gives a zero width or height")),
+        size => Ok(size),
+    }
+}
+
+/// Width and height from a JPEG's start-of-frame segment, walking the segments before it.
+fn jpeg_size(data: &[u8]) -> Result<(u32, u32), ClientError> {
+    let bad = |reason: String| ClientError::Image {
+        what: "jpeg",
+        reason,
+    };
+    if !data.starts_with(&[0xFF, 0xD8]) {
+        return Err(bad("no JPEG start-of-image marker".into()));
+    }
+    let mut at = 2;
+    // Each step moves past one segment, so the walk ends within `data.len()` steps.
+    while at + 4 <= data.len() {
+        if data[at] != 0xFF {
+            return Err(bad(format!("no segment marker at byte {at}")));
+        }
+        let marker = data[at + 1];
+        match marker {
+            // Fill bytes before a marker.
+            0xFF => at += 1,
+            // Markers without a length.
+            0x01 | 0xD0..=0xD7 => at += 2,
+            0xD9 | 0xDA => break,
+            _ => {
+                let len = usize::from(u16::from_be_bytes([data[at + 2], data[at + 3]]));
+                // SOF0..SOF15, except DHT (C4), JPG (C8) and DAC (CC).
+                let is_sof = matches!(marker, 0xC0..=0xCF) && !matches!(marker, 0xC4 | 0xC8 | 0xCC);
+                if is_sof {
+                    if len < 7 || at + 9 > data.len() {
+                        break;
+                    }
+                    let h = u16::from_be_bytes([data[at + 5], data[at + 6]]);
+                    let w = u16::from_be_bytes([data[at + 7], data[at + 8]]);
+                    if w == 0 || h == 0 {
+                        return Err(bad("start of frame gives a zero width or height".into()));
+                    }
+                    return Ok((u32::from(w), u32::from(h)));
+                }
+                if len < 2 {
+                    return Err(bad(format!("segment length {len} at byte {at}")));
+                }
+                at += 2 + len;
+            }
+        }
+    }
+    Err(bad("no start-of-frame segment before the image data".into()))
 }
 
 /// Builds a [`Frame`] around a cloud.
@@ -638,6 +696,48 @@ mod tests {
         let wrong = intrinsics(6, 3, 10.0, 10.0, 2.5, 1.5);
         assert!(camera_image(ImageData::Png(png), identity_pose(), wrong).is_err());
         assert!(camera_image(ImageData::Jpeg(vec![1, 2, 3]), identity_pose(), calib).is_err());
+    }
+
+    fn encoded(width: u32, height: u32, format: image::ImageFormat) -> Vec<u8> {
+        let img = image::RgbImage::from_fn(width, height, |x, y| image::Rgb([x as u8, y as u8, 7]));
+        let mut bytes = Vec::new();
+        img.write_to(&mut std::io::Cursor::new(&mut bytes), format)
+            .unwrap();
+        bytes
+    }
+
+    #[test]
+    fn sizes_are_read_from_real_encoders_headers() {
+        for (w, h) in [(1, 1), (5, 3), (320, 240), (641, 17)] {
+            assert_eq!(
+                png_size(&encoded(w, h, image::ImageFormat::Png)).unwrap(),
+                (w, h)
+            );
+            assert_eq!(
+                jpeg_size(&encoded(w, h, image::ImageFormat::Jpeg)).unwrap(),
+                (w, h)
+            );
+        }
+        let e = jpeg_size(&encoded(4, 4, image::ImageFormat::Png)).unwrap_err();
+        assert!(e.to_string().contains("jpeg"), "{e}");
+        let e = png_size(b"\x89PNG\r\n\x1a\n").unwrap_err();
+        assert!(e.to_string().contains("IHDR"), "{e}");
+    }
+
+    proptest! {
+        /// A cut or corrupted header is an error or a size, never a panic or a hang.
+        #[test]
+        fn damaged_headers_never_panic(cut in 0usize..700, flip in 0usize..700, byte: u8) {
+            for format in [image::ImageFormat::Png, image::ImageFormat::Jpeg] {
+                let mut data = encoded(9, 4, format);
+                if flip < data.len() {
+                    data[flip] = byte;
+                }
+                data.truncate(cut);
+                let _ = png_size(&data);
+                let _ = jpeg_size(&data);
+            }
+        }
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! Client SDK of the rooftop landing-site service, and the `landing` command line.
+//! Client SDK of the rooftop landing-site service.
 //!
 //! A fleet back-end connects with a [`ClientConfig`] (endpoint, bearer token, TLS), then either
 //! asks for one frame at a time with [`LandingClient::detect`] (retried with backoff on
@@ -6,7 +6,12 @@
 //! [`LandingClient::open_stream`] and reads one [`StreamItem`] per frame, whose
 //! [`FrameOutcome`] is a result, an error (with the decoded `BadRequest` field violations), or a
 //! skip. Frames are built from raw buffers with [`PointCloudBuilder`], [`camera_image`] and
-//! [`FrameBuilder`]. The wire types are the generated `landing_proto::v1` messages.
+//! [`FrameBuilder`]. The wire types are the generated `landing_proto::v1` messages, re-exported as
+//! [`v1`].
+//!
+//! The crate is what a fleet back end adds to its build: tonic, prost, tokio and what they need.
+//! The `landing` command line (`landing-cli`), the evaluation (`landing-eval`) and the file
+//! formats (`landing-recording`) are crates of their own.
 //!
 //! ```
 //! use landing_client::{FrameBuilder, PointCloudBuilder, unpack_point_cloud};
@@ -21,29 +26,46 @@
 //! # Ok::<(), landing_client::ClientError>(())
 //! ```
 //!
-//! Connecting needs a running server (`landing-server`):
+//! Connecting needs a running server (`landing-server`); this example is compiled, not run:
 //!
 //! ```no_run
-//! # async fn demo(frame: landing_proto::v1::Frame) -> Result<(), landing_client::ClientError> {
-//! use landing_client::{ClientConfig, LandingClient};
-//! let client = LandingClient::connect(ClientConfig::new("http://127.0.0.1:50051")).await?;
-//! let result = client.detect(frame).await?;
+//! # async fn demo(frames: Vec<landing_client::v1::Frame>) -> Result<(), landing_client::ClientError> {
+//! use landing_client::{ClientConfig, FrameOutcome, LandingClient, StreamConfig};
+//!
+//! let config = ClientConfig::new("http://127.0.0.1:50051").with_token("t");
+//! let client = LandingClient::connect(config).await?;
+//! // One frame, retried on UNAVAILABLE / RESOURCE_EXHAUSTED.
+//! let result = client.detect(frames[0].clone()).await?;
 //! println!("{} sites", result.sites.len());
+//!
+//! // A stream: `send` waits while `max_in_flight` frames are unanswered, so frames go out from
+//! // their own task while this one reads the answers, one per frame, in order.
+//! let (mut tx, mut rx) = client.open_stream(StreamConfig::default());
+//! tokio::spawn(async move {
+//!     for frame in frames {
+//!         if tx.send(frame).await.is_err() {
+//!             break;
+//!         }
+//!     }
+//!     tx.finish();
+//! });
+//! while let Some(item) = rx.next().await {
+//!     match item?.outcome {
+//!         FrameOutcome::Result(r) => println!("{} sites, best first", r.sites.len()),
+//!         FrameOutcome::Error(e) => println!("{}: {:?}", e.code, e.field_violations),
+//!         FrameOutcome::Skipped { superseded_by } => println!("skipped for {superseded_by}"),
+//!     }
+//! }
 //! # Ok(()) }
 //! ```
 
 #![forbid(unsafe_code)]
 
-pub mod cli;
 mod client;
 mod config;
 mod error;
-pub mod eval;
 mod frame;
-pub mod loadtest;
 mod outcome;
-pub mod recording;
-pub mod render;
 
 pub use client::{FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig};
 pub use config::{ClientConfig, DEFAULT_SERVER, RetryPolicy, TlsConfig};

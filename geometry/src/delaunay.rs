@@ -17,7 +17,7 @@
 //! The output layout is [`Triangulation`]'s: counter-clockwise triangles, half-edge twins.
 
 use crate::GeometryError;
-use crate::triangulation::{EMPTY, Triangulation, next_halfedge, prev_halfedge};
+use crate::mesh::{EMPTY, Triangulation, next_halfedge, prev_halfedge};
 
 /// Triangulates the x/y of `points` (finite coordinates). Fewer than three distinct points, or all
 /// points on one line, give an empty triangulation.

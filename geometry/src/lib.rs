@@ -36,6 +36,7 @@ pub mod boundary;
 pub mod class;
 pub mod delaunay;
 pub mod filter;
+mod mesh;
 pub mod polylabel;
 pub mod ranking;
 pub mod regions;

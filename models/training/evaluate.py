@@ -8,7 +8,7 @@ ignored; classes absent from both truth and prediction are N/A; the mean is over
 with an IoU.
 
 Example:
-  .venv/bin/python models/training/evaluate.py --test /work/data/test \
+  .venvs/train/bin/python models/training/evaluate.py --test /work/data/test \
       --model "MobileNet + FCN8s=models/rooftop-segmentation.onnx" \
       --json models/training/results/eval.json --markdown models/training/results/tables.md
 """

@@ -8,7 +8,7 @@ uint8 [1, H, W] (SemanticClass ids 1..14). Opset 18. Metadata: name, arch, input
 input_height, mean, std, classes.
 
 Example:
-  .venv/bin/python models/training/export.py models/training/runs/mobilenet_fcn8s.pt \
+  .venvs/train/bin/python models/training/export.py models/training/runs/mobilenet_fcn8s.pt \
       --out models/rooftop-segmentation.onnx --check-data perception/tests/data
 """
 

@@ -17,7 +17,7 @@ few border pixels. The service's own numbers are in EVALUATION.md (`landing eval
 Example (the scenario set of EVALUATION.md):
   target/release/landing-sim scenarios --seed 2026 --worlds 6 --buildings 6 --frames 4 \\
       --out eval-full/scenarios
-  .venv/bin/python models/training/multiscale.py eval-full/scenarios \\
+  .venvs/train/bin/python models/training/multiscale.py eval-full/scenarios \\
       --model models/rooftop-segmentation.onnx --sizes 320x240,256x192,160x120
 """
 

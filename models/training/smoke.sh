@@ -2,9 +2,11 @@
 # CI smoke test of the training code: a few training steps on the committed simulator frames
 # (perception/tests/data), ONNX export, and the parity check of ONNX Runtime against PyTorch.
 # Takes about a minute on 2 cores. Writes only under a temporary directory.
+# PYTHON: an interpreter with models/training/requirements.txt; by default the venv .venvs/train,
+# made or refreshed here by scripts/python-env.sh (PyTorch: gigabytes the first time).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
-python=${PYTHON:-$root/.venv/bin/python}
+python=${PYTHON:-$(bash "$root/scripts/python-env.sh" train "$root/models/training/requirements.txt")}
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 data="$root/perception/tests/data"

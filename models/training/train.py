@@ -6,7 +6,7 @@ learning rate follows a warm-up then a cosine decay over that budget, so a short
 annealed. The last weights are saved (with --val, the best on the validation subset is kept too).
 
 Example (the shipped model):
-  .venv/bin/python models/training/train.py --arch mobilenet_fcn8s \
+  .venvs/train/bin/python models/training/train.py --arch mobilenet_fcn8s \
       --train /work/data/train --minutes 40 --out models/training/runs/mobilenet_fcn8s.pt
 """
 

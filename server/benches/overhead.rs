@@ -30,7 +30,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use landing_client::eval::stats::{self, SplitMix64};
+use landing_eval::stats::{self, SplitMix64};
 use landing_geometry::synthetic::{Scene, SceneParams};
 use landing_proto::v1;
 use landing_proto::v1::landing_service_client::LandingServiceClient;
@@ -51,8 +51,7 @@ fn frames() -> Vec<(&'static str, v1::Frame, v1::SegmentationMode)> {
         }
     };
     let sample = landing_perception::workspace_root().join("samples/rooftops.mcap");
-    let mut recorded =
-        landing_sim::recording::read_recording(&sample).expect("samples/rooftops.mcap");
+    let mut recorded = landing_recording::read(&sample).expect("samples/rooftops.mcap");
     let mut frame = recorded.swap_remove(recorded.len() - 1).frame;
     frame.sequence = 99;
     let point_classes = v1::SegmentationMode::PointClasses;

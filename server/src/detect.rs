@@ -19,7 +19,7 @@ pub fn detect_ply(
     options: &FrameOptions,
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
-    let cloud = landing_sim::ply::read(path).map_err(|e| Error::from_ply(path, e))?;
+    let cloud = landing_recording::ply::read(path).map_err(|e| Error::from_ply(path, e))?;
     let frame = Frame {
         drone_id: String::new(),
         sequence: 0,
@@ -49,7 +49,7 @@ pub fn detect_recording(
         path: path.display().to_string(),
         reason,
     };
-    let frames = landing_sim::recording::read_recording(path).map_err(|e| io(e.to_string()))?;
+    let frames = landing_recording::read(path).map_err(|e| io(e.to_string()))?;
     let recorded = match sequence {
         Some(k) => frames
             .iter()
@@ -72,7 +72,7 @@ pub fn detect_recording(
             io(format!(
                 "frame {} has no label image ({}) for --segmentation class-image",
                 frame.sequence,
-                landing_sim::recording::LABELS_TOPIC
+                landing_recording::LABELS_TOPIC
             ))
         })?);
     }

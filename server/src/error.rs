@@ -87,12 +87,12 @@ impl Error {
         }
     }
 
-    /// A [`landing_sim::ply::PlyError`] for the file at `path`: [`Error::Io`] when the file could
+    /// A [`landing_recording::ply::PlyError`] for the file at `path`: [`Error::Io`] when the file could
     /// not be read, [`Error::Ply`] when its contents are not a usable PLY.
-    pub fn from_ply(path: &std::path::Path, error: landing_sim::ply::PlyError) -> Self {
+    pub fn from_ply(path: &std::path::Path, error: landing_recording::ply::PlyError) -> Self {
         let path = path.display().to_string();
         match error {
-            landing_sim::ply::PlyError::Io { source, .. } => Self::Io {
+            landing_recording::ply::PlyError::Io { source, .. } => Self::Io {
                 path,
                 reason: source.to_string(),
             },

@@ -70,11 +70,13 @@
 
 #![forbid(unsafe_code)]
 
+mod auth;
 pub mod cli;
 pub mod config;
 pub mod convert;
 pub mod detect;
 mod error;
+pub mod frame;
 pub mod geodetic;
 pub mod pipeline;
 pub mod segmentation;

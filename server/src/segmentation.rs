@@ -12,7 +12,7 @@ use landing_perception::{
 
 use crate::Error;
 use crate::config::SegmentationConfig;
-use crate::pipeline::{CameraImage, ImagePixels};
+use crate::frame::{CameraImage, ImagePixels};
 
 /// Classes of every point of a frame, from the model, with the time of each step.
 #[derive(Debug, Clone)]

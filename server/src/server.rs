@@ -5,7 +5,7 @@ use std::collections::HashSet;
 use std::future::Future;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::Context as _;
 use landing_geometry::Params;
@@ -15,13 +15,13 @@ use tokio::sync::{oneshot, watch};
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 
+use crate::auth::Auth;
 use crate::config::{Config, read_tokens};
 use crate::pipeline::Pipeline;
+use crate::segmentation;
 use crate::service::LandingService;
-use crate::status::to_status;
 use crate::telemetry::{Metrics, serve_metrics};
 use crate::workers::Dispatcher;
-use crate::{Error, segmentation};
 
 /// A server started by [`start`]: its addresses and the means to stop it.
 #[derive(Debug)]
@@ -273,41 +273,4 @@ fn tls_config(config: &Config) -> anyhow::Result<Option<ServerTlsConfig>> {
         )?));
     }
     Ok(Some(tls))
-}
-
-/// When a call's headers arrived.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Arrived(pub Instant);
-
-/// Runs when a call's headers arrive, before its body is read, for every service but health:
-/// stamps the arrival time (the caller's deadline counts from it, see
-/// [`crate::service::deadline_of`]) and checks the bearer token (`authorization: Bearer <token>`).
-#[derive(Debug, Clone)]
-struct Auth {
-    tokens: Option<Arc<HashSet<String>>>,
-}
-
-impl tonic::service::Interceptor for Auth {
-    fn call(
-        &mut self,
-        mut request: tonic::Request<()>,
-    ) -> Result<tonic::Request<()>, tonic::Status> {
-        request.extensions_mut().insert(Arrived(Instant::now()));
-        let Some(tokens) = &self.tokens else {
-            return Ok(request);
-        };
-        let token = request
-            .metadata()
-            .get("authorization")
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| {
-                v.strip_prefix("Bearer ")
-                    .or_else(|| v.strip_prefix("bearer "))
-            })
-            .map(str::trim);
-        match token {
-            Some(t) if tokens.contains(t) => Ok(request),
-            _ => Err(to_status(&Error::Unauthenticated)),
-        }
-    }
 }

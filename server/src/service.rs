@@ -10,8 +10,8 @@ use tokio::sync::{mpsc, watch};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
+use crate::auth::Arrived;
 use crate::convert;
-use crate::server::Arrived;
 use crate::status::{to_rpc_status, to_status};
 use crate::workers::{Dispatcher, Done};
 

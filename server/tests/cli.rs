@@ -4,7 +4,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 use landing_geometry::synthetic::{Scene, SceneParams};
-use landing_sim::ply::{PlyCloud, write_ascii, write_binary};
+use landing_recording::ply::{PlyCloud, write_ascii, write_binary};
 
 fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_landing-server"))

@@ -572,8 +572,7 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
     assert_eq!(model.sha256.len(), 64);
     assert_eq!(model.execution_provider, "cpu");
 
-    let recorded =
-        landing_sim::recording::read_recording(&workspace().join("samples/rooftops.mcap")).unwrap();
+    let recorded = landing_recording::read(&workspace().join("samples/rooftops.mcap")).unwrap();
     let frames: Vec<v1::Frame> = recorded.into_iter().take(4).map(|r| r.frame).collect();
     let options = v1::PipelineOptions {
         segmentation_mode: v1::SegmentationMode::Model as i32,

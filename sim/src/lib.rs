@@ -9,9 +9,9 @@
 //! hierarchy over analytic boxes, cylinders, cones and spheres ([`scene`]). [`flight`] makes the
 //! poses (T_world_sensor, camera in the optical convention), [`truth`] the per-frame ground truth
 //! (roofs in view, obstacle footprints, true best landing point from
-//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP files and their reader,
-//! [`dataset`] the image/label datasets (its module docs give the manifest format), and [`ply`] the
-//! workspace's one PLY point-cloud reader and writer (also used by the server and the client).
+//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP recordings of flights (the
+//! format, its writer and its reader are `landing_recording`'s), and [`dataset`] the image/label
+//! datasets (its module docs give the manifest format).
 //!
 //! Classes are [`landing_geometry::SemanticClass`] ids everywhere.
 //!
@@ -57,7 +57,6 @@ pub mod dataset;
 pub mod flight;
 pub mod lidar;
 pub mod math;
-pub mod ply;
 pub mod recording;
 pub mod scene;
 pub mod truth;
@@ -88,15 +87,12 @@ pub enum SimError {
     /// Encoding or decoding an image failed.
     #[error("image codec: {0}")]
     Image(String),
-    /// Writing or reading an MCAP recording failed.
-    #[error("mcap: {0}")]
-    Mcap(String),
+    /// Writing or reading a recording failed.
+    #[error(transparent)]
+    Recording(#[from] landing_recording::Error),
     /// A geometry routine (polylabel) failed.
     #[error("geometry: {0}")]
     Geometry(String),
-    /// A recorded message could not be decoded.
-    #[error("decoding `{what}`: {reason}")]
-    Decode { what: String, reason: String },
 }
 
 impl SimError {

@@ -1,23 +1,16 @@
-//! Simulated flights as MCAP recordings, and a reader for them.
+//! Simulated flights as MCAP recordings, in the format of [`landing_recording`], which also
+//! reads them back.
 //!
-//! A recording has three protobuf channels (schemas embedded as `landing_proto::FILE_DESCRIPTOR_SET`):
-//!
-//! | topic | schema | content |
-//! |---|---|---|
-//! | [`FRAME_TOPIC`] `/frame` | `landing.v1.Frame` | LiDAR scan (LiDAR frame, pose = T_world_lidar; fields x, y, z, intensity FLOAT32 and class UINT8, stride 17) and PNG camera image (pose = T_world_camera, optical) |
-//! | [`TRUTH_TOPIC`] `/ground_truth` | `landing.v1.GroundTruth` | roofs in view, obstacles, true best landing point per roof |
-//! | [`LABELS_TOPIC`] `/camera/labels` | `landing.v1.CameraImage` | 8-bit grayscale PNG, pixel value = class id |
-//!
-//! Messages of one frame share its sequence number and log time. The same seed gives a
-//! byte-identical file.
+//! Each frame is three messages at the frame's timestamp: the `landing.v1.Frame` (LiDAR scan in
+//! the LiDAR frame, pose = T_world_lidar, fields x, y, z, intensity FLOAT32 and class UINT8,
+//! stride 17; PNG camera image, pose = T_world_camera, optical), its `landing.v1.GroundTruth`
+//! and its true label image. The same seed gives a byte-identical file.
 
-use std::collections::BTreeMap;
 use std::io::Cursor;
 use std::path::Path;
 
 use landing_proto::v1;
 use nalgebra::Isometry3;
-use prost::Message;
 use rand::SeedableRng;
 use rand::rngs::SmallRng;
 
@@ -28,10 +21,6 @@ use crate::flight::{FlightConfig, View, approach, lidar_pose};
 use crate::lidar::{LidarConfig, LidarPoint, scan};
 use crate::truth::{RoofTruth, TruthConfig, ground_truth};
 use crate::world::{World, WorldConfig};
-
-pub const FRAME_TOPIC: &str = "/frame";
-pub const TRUTH_TOPIC: &str = "/ground_truth";
-pub const LABELS_TOPIC: &str = "/camera/labels";
 
 /// Bytes per packed point: x, y, z, intensity (FLOAT32) and class (UINT8).
 pub const POINT_STRIDE: u32 = 17;
@@ -328,10 +317,6 @@ pub fn frame_messages(
     Ok((frame, truth, labels))
 }
 
-fn mcap_err(e: mcap::McapError) -> SimError {
-    SimError::Mcap(e.to_string())
-}
-
 /// Simulates a flight and writes it as an MCAP file (zstd chunks). Returns the frame count.
 pub fn write_recording(config: &RecordConfig, path: &Path) -> Result<usize, SimError> {
     let (world, frames) = simulate(config)?;
@@ -340,127 +325,40 @@ pub fn write_recording(config: &RecordConfig, path: &Path) -> Result<usize, SimE
     Ok(frames.len())
 }
 
-/// Encodes simulated frames as MCAP bytes.
+/// Encodes simulated frames as MCAP bytes: per frame, the frame, its ground truth and its label
+/// image, at the frame's timestamp ([`landing_recording`] owns the format).
 pub fn encode_recording(
     world: &World,
     frames: &[SimFrame],
     config: &RecordConfig,
 ) -> Result<Vec<u8>, SimError> {
-    let opts = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .profile("")
-        .library("landing-sim");
-    let mut w = opts.create(Cursor::new(Vec::new())).map_err(mcap_err)?;
-    let fds = landing_proto::FILE_DESCRIPTOR_SET;
-    let meta = BTreeMap::new();
-    let frame_schema = w
-        .add_schema("landing.v1.Frame", "protobuf", fds)
-        .map_err(mcap_err)?;
-    let truth_schema = w
-        .add_schema("landing.v1.GroundTruth", "protobuf", fds)
-        .map_err(mcap_err)?;
-    let image_schema = w
-        .add_schema("landing.v1.CameraImage", "protobuf", fds)
-        .map_err(mcap_err)?;
-    let frame_ch = w
-        .add_channel(frame_schema, FRAME_TOPIC, "protobuf", &meta)
-        .map_err(mcap_err)?;
-    let truth_ch = w
-        .add_channel(truth_schema, TRUTH_TOPIC, "protobuf", &meta)
-        .map_err(mcap_err)?;
-    let label_ch = w
-        .add_channel(image_schema, LABELS_TOPIC, "protobuf", &meta)
-        .map_err(mcap_err)?;
+    let mut w = landing_recording::Writer::new(Cursor::new(Vec::new()), "landing-sim")?;
     for f in frames {
         let (frame, truth, labels) = frame_messages(world, f, config)?;
-        let ts = frame.timestamp.unwrap_or_default();
-        let t = (ts.seconds as u64) * 1_000_000_000 + ts.nanos as u64;
-        for (ch, data) in [
-            (frame_ch, frame.encode_to_vec()),
-            (truth_ch, truth.encode_to_vec()),
-            (label_ch, labels.encode_to_vec()),
-        ] {
-            let header = mcap::records::MessageHeader {
-                channel_id: ch,
-                sequence: f.sequence as u32,
-                log_time: t,
-                publish_time: t,
-            };
-            w.write_to_known_channel(&header, &data).map_err(mcap_err)?;
-        }
+        let t = landing_recording::log_time_ns(&frame.timestamp.unwrap_or_default());
+        w.write_frame(t, &frame)?;
+        w.write_truth(t, &truth)?;
+        w.write_labels(t, f.sequence, &labels)?;
     }
-    w.finish().map_err(mcap_err)?;
-    Ok(w.into_inner().into_inner())
-}
-
-/// One frame read back from a recording.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RecordedFrame {
-    pub frame: v1::Frame,
-    pub truth: Option<v1::GroundTruth>,
-    pub labels: Option<v1::CameraImage>,
-}
-
-/// Reads every frame of an MCAP file written by [`write_recording`], in sequence order, with
-/// the ground truth and label image of the same sequence number.
-pub fn read_recording(path: &Path) -> Result<Vec<RecordedFrame>, SimError> {
-    let bytes = std::fs::read(path).map_err(|e| SimError::io(path, e))?;
-    read_recording_bytes(&bytes)
-}
-
-/// Like [`read_recording`], from bytes.
-pub fn read_recording_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, SimError> {
-    let mut frames: BTreeMap<u64, v1::Frame> = BTreeMap::new();
-    let mut truths: BTreeMap<u64, v1::GroundTruth> = BTreeMap::new();
-    let mut labels: BTreeMap<u64, v1::CameraImage> = BTreeMap::new();
-    let dec = |what: &str, e: prost::DecodeError| SimError::Decode {
-        what: what.to_string(),
-        reason: e.to_string(),
-    };
-    for msg in mcap::MessageStream::new(bytes).map_err(mcap_err)? {
-        let msg = msg.map_err(mcap_err)?;
-        match msg.channel.topic.as_str() {
-            FRAME_TOPIC => {
-                let f = v1::Frame::decode(&*msg.data).map_err(|e| dec(FRAME_TOPIC, e))?;
-                frames.insert(f.sequence, f);
-            }
-            TRUTH_TOPIC => {
-                let t = v1::GroundTruth::decode(&*msg.data).map_err(|e| dec(TRUTH_TOPIC, e))?;
-                truths.insert(t.sequence, t);
-            }
-            LABELS_TOPIC => {
-                let l = v1::CameraImage::decode(&*msg.data).map_err(|e| dec(LABELS_TOPIC, e))?;
-                labels.insert(u64::from(msg.sequence), l);
-            }
-            _ => {}
-        }
-    }
-    Ok(frames
-        .into_iter()
-        .map(|(seq, frame)| RecordedFrame {
-            frame,
-            truth: truths.remove(&seq),
-            labels: labels.remove(&seq),
-        })
-        .collect())
+    Ok(w.finish()?.into_inner())
 }
 
 /// The (Frame, GroundTruth) pairs of a recording; frames without ground truth are skipped.
 pub fn read_pairs(path: &Path) -> Result<Vec<(v1::Frame, v1::GroundTruth)>, SimError> {
-    Ok(read_recording(path)?
+    Ok(landing_recording::read(path)?
         .into_iter()
         .filter_map(|r| r.truth.map(|t| (r.frame, t)))
         .collect())
 }
 
 /// Writes points (world coordinates) as a binary little-endian PLY with `x y z` float and
-/// `class` uchar ([`crate::ply::write_binary`], with a comment naming the frame).
+/// `class` uchar ([`landing_recording::ply::write_binary`], with a comment naming the frame).
 pub fn write_ply(points: &[LidarPoint], path: &Path) -> Result<(), SimError> {
-    let cloud = crate::ply::PlyCloud {
+    let cloud = landing_recording::ply::PlyCloud {
         points: points.iter().map(|p| p.world.map(|v| v as f32)).collect(),
         classes: Some(points.iter().map(|p| p.class).collect()),
     };
-    let out = crate::ply::write_binary_with_comment(
+    let out = landing_recording::ply::write_binary_with_comment(
         &cloud,
         Some("landing-sim LiDAR scan, world coordinates (ENU, metres)"),
     );

@@ -7,9 +7,7 @@ use landing_geometry::Polygon;
 use landing_geometry::polylabel::signed_distance;
 use landing_proto::v1;
 use landing_sim::flight::FlightConfig;
-use landing_sim::recording::{
-    RecordConfig, encode_recording, pose_from_proto, read_recording, read_recording_bytes, simulate,
-};
+use landing_sim::recording::{RecordConfig, encode_recording, pose_from_proto, simulate};
 use nalgebra::Point3;
 
 fn config(seed: u64, frames: u32) -> RecordConfig {
@@ -56,7 +54,7 @@ fn decode_png_l8(img: &v1::CameraImage) -> (u32, u32, Vec<u8>) {
 /// Counts (agreeing, checked) points: each LiDAR point is moved to the world with the recorded
 /// T_world_lidar, into the camera with the recorded T_world_camera, projected with the recorded
 /// intrinsics, and compared with the label image where the 3×3 neighbourhood has one label.
-fn projection_agreement(frames: &[landing_sim::recording::RecordedFrame]) -> (usize, usize) {
+fn projection_agreement(frames: &[landing_recording::RecordedFrame]) -> (usize, usize) {
     let (mut agree, mut checked) = (0usize, 0usize);
     for rf in frames {
         let pc = rf.frame.point_cloud.as_ref().expect("cloud");
@@ -106,7 +104,7 @@ fn lidar_points_project_onto_their_own_class_in_the_label_image() {
             height: 240,
             ..config(seed, 8)
         };
-        let frames = read_recording_bytes(&record(&cfg)).expect("read back");
+        let frames = landing_recording::read_bytes(&record(&cfg)).expect("read back");
         assert_eq!(frames.len(), 8);
         let (agree, checked) = projection_agreement(&frames);
         assert!(
@@ -136,7 +134,7 @@ fn to_polygon(p: &v1::Polygon) -> Polygon {
 
 #[test]
 fn best_landing_point_is_inside_the_free_roof_at_its_radius() {
-    let frames = read_recording_bytes(&record(&config(7, 6))).expect("read back");
+    let frames = landing_recording::read_bytes(&record(&config(7, 6))).expect("read back");
     for rf in &frames {
         let gt = rf.truth.as_ref().expect("truth");
         assert!(!gt.roofs.is_empty());
@@ -184,7 +182,7 @@ fn best_landing_point_is_inside_the_free_roof_at_its_radius() {
 #[test]
 fn committed_sample_recording_replays() {
     let path = samples().join("rooftops.mcap");
-    let frames = read_recording(&path).expect("samples/rooftops.mcap");
+    let frames = landing_recording::read(&path).expect("samples/rooftops.mcap");
     assert!((10..=20).contains(&frames.len()), "{} frames", frames.len());
     assert!(std::fs::metadata(&path).expect("size").len() <= 5_000_000);
     for rf in &frames {

@@ -2,11 +2,11 @@
 
 use std::path::PathBuf;
 
-use landing_client::cli::exit;
-use landing_client::recording::RESULT_TOPIC;
-use landing_client::render::{RenderConfig, STAR_YELLOW, render};
+use landing_cli::exit;
+use landing_cli::render::{RenderConfig, STAR_YELLOW, render};
 use landing_client::v1::{self, SegmentationMode};
 use landing_client::{FrameBuilder, PointCloudBuilder, unpack_point_cloud};
+use landing_recording::RESULT_TOPIC;
 use prost::Message;
 use serde_json::Value;
 

@@ -127,9 +127,7 @@ async fn a_geodetic_origin_gives_sites_latitude_and_longitude() {
 }
 
 /// The frame's true label image as raw mono8 pixels, with its width and height.
-fn true_labels(
-    frame: &landing_sim::recording::RecordedFrame,
-) -> (v1::CameraImage, Vec<u8>, u32, u32) {
+fn true_labels(frame: &landing_recording::RecordedFrame) -> (v1::CameraImage, Vec<u8>, u32, u32) {
     let labels = frame.labels.clone().expect("the simulator records labels");
     let Some(v1::camera_image::Image::Compressed(png)) = &labels.image else {
         panic!("labels are a PNG")

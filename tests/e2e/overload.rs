@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::Duration;
 
-use landing_client::loadtest::{LoadTestConfig, run_load_test};
+use landing_cli::loadtest::{LoadTestConfig, run_load_test};
 use landing_client::v1::SegmentationMode;
 use landing_client::{FrameOutcome, LandingClient, RetryPolicy, StreamConfig};
 

@@ -89,7 +89,7 @@ async fn tokens_let_friends_in_and_keep_strangers_out() {
     // The CLI maps a refusal to exit 6 and takes the token from --token.
     assert_eq!(
         landing(&["--server", &server.url, "info"]).await.0,
-        landing_client::cli::exit::AUTH
+        landing_cli::exit::AUTH
     );
     assert_eq!(
         landing(&["--server", &server.url, "--token", "alpha-token", "info"])

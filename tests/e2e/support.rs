@@ -10,11 +10,10 @@ use landing_client::v1::{self, PipelineOptions, SegmentationMode};
 use landing_client::{
     ClientConfig, FrameOutcome, LandingClient, RetryPolicy, StreamConfig, StreamItem,
 };
+use landing_recording::RecordedFrame;
 use landing_server::pipeline::Pipeline;
 use landing_server::{Config, RunningServer, convert, run_pipeline};
-use landing_sim::recording::{
-    RecordConfig, RecordedFrame, encode_recording, read_recording_bytes, simulate,
-};
+use landing_sim::recording::{RecordConfig, encode_recording, simulate};
 
 /// The workspace root.
 pub fn workspace_root() -> PathBuf {
@@ -173,7 +172,7 @@ pub fn scene(seed: u64) -> Arc<Scene> {
             let bytes = encode_recording(&world, &frames, &config).expect("encode the recording");
             let path = scratch().join(format!("scene-{seed}.mcap"));
             std::fs::write(&path, &bytes).expect("write the recording");
-            let frames = read_recording_bytes(&bytes).expect("read the recording back");
+            let frames = landing_recording::read_bytes(&bytes).expect("read the recording back");
             assert_eq!(frames.len(), SCENE_FRAMES as usize);
             Arc::new(Scene { frames, path })
         })
@@ -281,6 +280,6 @@ pub async fn landing(args: &[&str]) -> (u8, String) {
     let mut out = Vec::new();
     let mut argv = vec!["landing"];
     argv.extend_from_slice(args);
-    let code = landing_client::cli::run(argv, &mut out).await;
+    let code = landing_cli::run(argv, &mut out).await;
     (code, String::from_utf8(out).expect("utf-8 output"))
 }

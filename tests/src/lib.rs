@@ -1,6 +1,6 @@
 //! End-to-end tests of the rooftop landing-site service: the real server (`landing-server`) on
 //! `127.0.0.1:0`, frames simulated by `landing-sim` and written as real MCAP recordings, driven
-//! through the client SDK and the `landing` command line (`landing-client`). No mocks.
+//! through the client SDK (`landing-client`) and the `landing` command line (`landing-cli`). No mocks.
 //!
 //! The tests are one binary, `tests/e2e/main.rs`, with a module per topic (detect, stream,
 //! errors, overload, shutdown, security, health and reflection, cli); `e2e/support.rs` holds the

@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use super::geom::{Grid, Mask, P2, Polygon2};
+use crate::geom::{Grid, Mask, P2, Polygon2};
 
 /// Parameters of the metrics. `Default` holds the values the evaluation reports with.
 #[derive(Debug, Clone, PartialEq)]
@@ -290,7 +290,7 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
         for &k in &on_roof {
             pts.extend(sites[k].polygon.shell.iter().copied());
         }
-        let Some((lo, hi)) = super::geom::bounds_of(&pts) else {
+        let Some((lo, hi)) = crate::geom::bounds_of(&pts) else {
             continue;
         };
         let Some(grid) = Grid::covering(lo, hi, params.cell_m, 2.0 * params.cell_m) else {

@@ -4,8 +4,8 @@
 # drone that segments on board), and off (geometry only), against a release server started
 # here. Prints one Markdown table row per run; the JSON summaries go to $OUT_DIR.
 #
-#   cargo build --release -p landing-server -p landing-client
-#   client/scripts/loadtest-matrix.sh [DURATION_S] [STREAMS...]
+#   cargo build --release -p landing-server -p landing-cli
+#   cli/scripts/loadtest-matrix.sh [DURATION_S] [STREAMS...]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 DURATION=${1:-10}
@@ -15,8 +15,10 @@ PORT=${PORT:-50081}
 OUT_DIR=${OUT_DIR:-target/loadtest}
 WINDOW=${WINDOW:-2}
 mkdir -p "$OUT_DIR"
-SERVER=${SERVER:-target/release/landing-server}
-LANDING=${LANDING:-target/release/landing}
+. scripts/lib.sh
+if [ -z "${SERVER:-}" ] || [ -z "${LANDING:-}" ]; then bin=$(release_bin_dir); fi  # honours CARGO_TARGET_DIR
+SERVER=${SERVER:-$bin/landing-server}
+LANDING=${LANDING:-$bin/landing}
 REC=samples/rooftops.mcap
 
 "$SERVER" serve --listen "127.0.0.1:$PORT" --metrics-listen "" >"$OUT_DIR/server.log" 2>&1 &

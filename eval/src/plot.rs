@@ -5,8 +5,8 @@ use std::path::Path;
 
 use image::{Rgb, RgbImage};
 
-use super::stats::{MeanCi, quantile};
-use crate::ClientError;
+use crate::EvalError;
+use crate::stats::{MeanCi, quantile};
 
 /// Colours given to series in order.
 pub const PALETTE: [[u8; 3]; 4] = [[214, 96, 77], [67, 147, 195], [77, 175, 74], [152, 78, 163]];
@@ -111,11 +111,11 @@ impl Canvas {
     }
 
     /// Writes the PNG.
-    pub fn save(&self, path: &Path) -> Result<(), ClientError> {
+    pub fn save(&self, path: &Path) -> Result<(), EvalError> {
         self.img
             .save_with_format(path, image::ImageFormat::Png)
-            .map_err(|e| ClientError::Image {
-                what: path.display().to_string(),
+            .map_err(|e| EvalError::Image {
+                path: path.display().to_string(),
                 reason: e.to_string(),
             })
     }

@@ -1,4 +1,4 @@
-//! The `landing` command line, callable in-process ([`run`]) so tests drive it like a user.
+//! The `landing` subcommands and their output (tables or JSON); [`run`] parses and runs one.
 //!
 //! Exit codes (also in `landing --help`):
 //!
@@ -24,31 +24,16 @@ use landing_proto::v1::{
 };
 use serde_json::{Value, json};
 
-use crate::loadtest::{LoadTestConfig, LoadTestReport, run_load_test};
-use crate::recording::{RecordedFrame, ResultWriter, read_frames};
-use crate::render::{RenderConfig, render};
-use crate::{
-    ClientConfig, ClientError, FrameBuilder, FrameOutcome, LandingClient, PointCloudBuilder,
-    StreamConfig, StreamItem, TlsConfig, code_label, duration_from_proto,
+use landing_client::{
+    ClientError, FrameBuilder, FrameOutcome, LandingClient, PointCloudBuilder, StreamConfig,
+    StreamItem, code_label, duration_from_proto,
 };
+use landing_recording::RecordedFrame;
 
-/// Process exit codes of `landing`.
-pub mod exit {
-    /// Success.
-    pub const OK: u8 = 0;
-    /// Any other error.
-    pub const ERROR: u8 = 1;
-    /// Bad command line.
-    pub const USAGE: u8 = 2;
-    /// The server could not be reached.
-    pub const UNREACHABLE: u8 = 3;
-    /// Some frames were answered with an error.
-    pub const FRAMES_FAILED: u8 = 4;
-    /// A load test saw a frame unanswered or answered twice.
-    pub const INTEGRITY: u8 = 5;
-    /// The server refused the credentials.
-    pub const AUTH: u8 = 6;
-}
+pub use crate::args::{CliError, ConnectionArgs, exit};
+use crate::args::{connect, io, usage};
+use crate::loadtest::{LoadTestConfig, LoadTestReport, run_load_test};
+use crate::render::{RenderConfig, render};
 
 const AFTER_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage, 3 server unreachable, 4 frames failed, \
 5 load-test integrity failure (a frame unanswered or answered twice), 6 authentication refused.";
@@ -66,35 +51,6 @@ pub struct Cli {
     pub command: Command,
 }
 
-/// How to reach the server; the same options as the server's TLS and auth settings.
-#[derive(Debug, Clone, Args)]
-pub struct ConnectionArgs {
-    /// Server URL (`https://` for TLS).
-    #[arg(long, global = true, env = "LANDING_SERVER", default_value = crate::DEFAULT_SERVER)]
-    pub server: String,
-    /// Bearer token.
-    #[arg(long, global = true, env = "LANDING_TOKEN", hide_env_values = true)]
-    pub token: Option<String>,
-    /// CA certificate (PEM) that signed the server's certificate.
-    #[arg(long, global = true)]
-    pub ca_cert: Option<PathBuf>,
-    /// Client certificate (PEM) for mutual TLS.
-    #[arg(long, global = true, requires = "client_key")]
-    pub client_cert: Option<PathBuf>,
-    /// Client key (PEM) for mutual TLS.
-    #[arg(long, global = true, requires = "client_cert")]
-    pub client_key: Option<PathBuf>,
-    /// Name to check the server certificate against, when it differs from the URL's host.
-    #[arg(long, global = true)]
-    pub tls_domain: Option<String>,
-    /// Seconds to wait for the connection.
-    #[arg(long, global = true, default_value_t = 5.0)]
-    pub connect_timeout: f64,
-    /// Deadline of each unary call, seconds.
-    #[arg(long, global = true, default_value_t = 60.0)]
-    pub timeout: f64,
-}
-
 /// The subcommands.
 #[derive(Debug, Subcommand)]
 pub enum Command {
@@ -110,7 +66,7 @@ pub enum Command {
     Render(RenderArgs),
     /// Score landing sites against simulator ground truth in three segmentation modes (exit 7
     /// when a gated mode returned an unsafe site).
-    Eval(crate::eval::cli::EvalArgs),
+    Eval(crate::eval::EvalArgs),
 }
 
 /// Pipeline options shared by the subcommands that send frames.
@@ -276,44 +232,6 @@ pub struct RenderArgs {
     pub pipeline: PipelineArgs,
 }
 
-/// A failure with the exit code it maps to.
-#[derive(Debug)]
-pub struct CliError {
-    /// One of [`exit`].
-    pub code: u8,
-    /// What to tell the user.
-    pub message: String,
-}
-
-impl From<ClientError> for CliError {
-    fn from(e: ClientError) -> Self {
-        let code = if e.is_unreachable() {
-            exit::UNREACHABLE
-        } else if matches!(
-            e.code(),
-            Some(tonic::Code::Unauthenticated | tonic::Code::PermissionDenied)
-        ) {
-            exit::AUTH
-        } else if matches!(e.code(), Some(tonic::Code::DeadlineExceeded)) {
-            exit::UNREACHABLE
-        } else {
-            exit::ERROR
-        };
-        let mut message = e.to_string();
-        if let ClientError::Status(f) = &e {
-            message = format!("server answered {f}");
-        }
-        Self { code, message }
-    }
-}
-
-fn usage(message: impl Into<String>) -> CliError {
-    CliError {
-        code: exit::USAGE,
-        message: message.into(),
-    }
-}
-
 /// Runs `landing` with `args` (the first is the program name), writing results to `out` and
 /// diagnostics to stderr. Returns the exit code.
 pub async fn run<I, T>(args: I, out: &mut (dyn Write + Send)) -> u8
@@ -359,57 +277,17 @@ pub async fn execute(cli: &Cli, out: &mut (dyn Write + Send)) -> Result<u8, CliE
         Command::Replay(a) => replay(cli, a, out).await,
         Command::Loadtest(a) => loadtest(cli, a, out).await,
         Command::Render(a) => render_cmd(cli, a, out).await,
-        Command::Eval(a) => crate::eval::cli::eval_cmd(&cli.connection, a, cli.json, out).await,
-    }
-}
-
-/// The client configuration described by the connection flags.
-pub fn client_config(c: &ConnectionArgs) -> Result<ClientConfig, CliError> {
-    let mut config = ClientConfig::new(c.server.clone());
-    config.token = c.token.clone().filter(|t| !t.is_empty());
-    if !(c.connect_timeout > 0.0 && c.connect_timeout.is_finite()) {
-        return Err(usage(format!(
-            "--connect-timeout {} must be positive",
-            c.connect_timeout
-        )));
-    }
-    if !(c.timeout > 0.0 && c.timeout.is_finite()) {
-        return Err(usage(format!("--timeout {} must be positive", c.timeout)));
-    }
-    config.connect_timeout = Duration::from_secs_f64(c.connect_timeout);
-    config.request_timeout = Some(Duration::from_secs_f64(c.timeout));
-    if c.ca_cert.is_some() || c.client_cert.is_some() || c.server.starts_with("https://") {
-        let mut tls = TlsConfig::from_files(
-            c.ca_cert.as_deref(),
-            c.client_cert.as_deref(),
-            c.client_key.as_deref(),
-        )?;
-        tls.domain_name = c.tls_domain.clone();
-        config.tls = Some(tls);
-    }
-    Ok(config)
-}
-
-async fn connect(c: &ConnectionArgs) -> Result<LandingClient, CliError> {
-    let config = client_config(c)?;
-    match LandingClient::connect(config).await {
-        Ok(client) => Ok(client),
-        Err(e @ ClientError::InvalidConfig { .. }) => Err(usage(e.to_string())),
-        Err(e) => Err(e.into()),
-    }
-}
-
-fn io(e: std::io::Error) -> CliError {
-    CliError {
-        code: exit::ERROR,
-        message: format!("cannot write output: {e}"),
+        Command::Eval(a) => crate::eval::eval_cmd(&cli.connection, a, cli.json, out).await,
     }
 }
 
 /// The frames of a recording as the flags send them: with `--segmentation class-image`, each
 /// frame carries its recorded label image as its class image.
 fn recorded_frames(path: &Path, pipeline: &PipelineArgs) -> Result<Vec<RecordedFrame>, CliError> {
-    let mut frames = read_frames(path)?;
+    let mut frames = landing_recording::read(path).map_err(|e| CliError {
+        code: exit::ERROR,
+        message: format!("recording `{}`: {e}", path.display()),
+    })?;
     if pipeline.segmentation == Segmentation::ClassImage {
         for f in &mut frames {
             let labels = f.labels.take().ok_or_else(|| {
@@ -417,7 +295,7 @@ fn recorded_frames(path: &Path, pipeline: &PipelineArgs) -> Result<Vec<RecordedF
                     "--segmentation class-image: frame {} of {} has no label image on `{}`",
                     f.frame.sequence,
                     path.display(),
-                    crate::recording::LABELS_TOPIC
+                    landing_recording::LABELS_TOPIC
                 ))
             })?;
             f.frame.class_image = Some(labels);
@@ -438,11 +316,11 @@ fn load_frame(path: &Path, index: usize, pipeline: &PipelineArgs) -> Result<Fram
                 path.display()
             )));
         }
-        let ply = landing_sim::ply::read(path).map_err(|e| match e {
-            landing_sim::ply::PlyError::Io { source, .. } => ClientError::io(path, source),
-            other => ClientError::Recording {
-                path: path.display().to_string(),
-                reason: other.to_string(),
+        let ply = landing_recording::ply::read(path).map_err(|e| CliError {
+            code: exit::ERROR,
+            message: match e {
+                landing_recording::ply::PlyError::Io { .. } => e.to_string(),
+                other => format!("`{}`: {other}", path.display()),
             },
         })?;
         let mut builder = PointCloudBuilder::new(&ply.points).frame_id("world");
@@ -496,12 +374,18 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         frames.truncate(l);
     }
     let client = connect(&cli.connection).await?;
-    let mut mcap = a.out.as_deref().map(ResultWriter::create).transpose()?;
+    let mut mcap = a
+        .out
+        .as_deref()
+        .map(|p| {
+            landing_recording::Writer::create(p, concat!("landing ", env!("CARGO_PKG_VERSION")))
+        })
+        .transpose()?;
     let mut jsonl = match &a.jsonl {
         Some(p) => Some(std::io::BufWriter::new(std::fs::File::create(p).map_err(
-            |e| ClientError::Io {
-                path: p.display().to_string(),
-                source: e,
+            |e| CliError {
+                code: exit::ERROR,
+                message: format!("cannot create `{}`: {e}", p.display()),
             },
         )?)),
         None => None,
@@ -521,7 +405,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
             writeln!(w, "{}", item_json(item))?;
         }
         if let Some(w) = mcap.as_mut() {
-            w.write(rec.log_time_ns, &response_of(item))
+            w.write_result(rec.log_time_ns, &response_of(item))
                 .map_err(std::io::Error::other)?;
         }
         Ok(())
@@ -703,13 +587,10 @@ async fn render_cmd(
             ..RenderConfig::default()
         },
     )?;
-    rendered
-        .image
-        .save(&a.out)
-        .map_err(|e| ClientError::Image {
-            what: a.out.display().to_string(),
-            reason: e.to_string(),
-        })?;
+    rendered.image.save(&a.out).map_err(|e| CliError {
+        code: exit::ERROR,
+        message: format!("cannot write `{}`: {e}", a.out.display()),
+    })?;
     if cli.json {
         let v = json!({ "out": a.out.display().to_string(), "width": rendered.image.width(),
             "height": rendered.image.height(), "result": result_json(&result) });
@@ -1126,7 +1007,7 @@ mod tests {
         let mcap = root.join("samples/rooftops.mcap");
         let a = args(mcap.to_str().unwrap());
         let frame = load_frame(&a.input, 2, &a.pipeline).unwrap();
-        let labels = read_frames(&mcap).unwrap()[2].labels.clone();
+        let labels = landing_recording::read(&mcap).unwrap()[2].labels.clone();
         assert!(labels.is_some());
         assert_eq!(frame.class_image, labels);
         // Other modes send the frame as recorded.
@@ -1145,10 +1026,10 @@ mod tests {
     fn item_json_carries_field_violations() {
         let item = StreamItem {
             sequence: 3,
-            outcome: FrameOutcome::Error(crate::FrameError {
+            outcome: FrameOutcome::Error(landing_client::FrameError {
                 code: tonic::Code::InvalidArgument,
                 message: "bad".into(),
-                field_violations: vec![crate::FieldViolation {
+                field_violations: vec![landing_client::FieldViolation {
                     field: "frame.point_cloud".into(),
                     description: "missing".into(),
                 }],

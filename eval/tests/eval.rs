@@ -2,7 +2,7 @@
 //! server: the truth conversion agrees with the simulator's own optimum, a perfect answer scores
 //! perfectly, an oversized circle is caught, and the report folder is written.
 
-use landing_client::eval;
+use landing_eval as eval;
 
 use std::path::PathBuf;
 

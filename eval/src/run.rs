@@ -8,10 +8,12 @@ use landing_proto::v1::{
     CameraImage, Frame, FrameResult, LandingSite, PipelineOptions, StageTimings,
 };
 
-use super::geom::{P2, Polygon2, convex_hull};
-use super::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
-use super::report::{FrameFailure, FrameRecord, Mode, STEPS};
-use crate::{ClientError, LandingClient};
+use crate::geom::{P2, Polygon2, convex_hull};
+use crate::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
+use crate::report::{FrameFailure, FrameRecord, Mode, STEPS};
+use landing_client::LandingClient;
+
+use crate::EvalError;
 
 /// One frame with its ground truth.
 #[derive(Debug, Clone)]
@@ -61,7 +63,7 @@ impl Default for EvalConfig {
 /// Fills each roof's scanned region, where the ground truth left it open, with the convex hull of
 /// the frame's LiDAR returns on that roof's surface (points inside the walkable roof within
 /// `band_m` of its height). A roof with fewer than three such points gets an empty region.
-pub fn fill_scanned_regions(scenario: &mut Scenario, band_m: f64) -> Result<(), ClientError> {
+pub fn fill_scanned_regions(scenario: &mut Scenario, band_m: f64) -> Result<(), EvalError> {
     if scenario.roofs.iter().all(|r| r.scanned.is_some()) {
         return Ok(());
     }
@@ -69,11 +71,11 @@ pub fn fill_scanned_regions(scenario: &mut Scenario, band_m: f64) -> Result<(), 
         .frame
         .point_cloud
         .as_ref()
-        .ok_or(ClientError::InvalidInput {
+        .ok_or(EvalError::Invalid {
             field: "frame.point_cloud",
             reason: "missing".into(),
         })?;
-    let world = crate::unpack_point_cloud(cloud)?.to_world(cloud.pose.as_ref());
+    let world = landing_client::unpack_point_cloud(cloud)?.to_world(cloud.pose.as_ref());
     for roof in scenario.roofs.iter_mut().filter(|r| r.scanned.is_none()) {
         let hits: Vec<P2> = world
             .iter()
@@ -122,7 +124,7 @@ pub fn step_times_ms(t: Option<&StageTimings>) -> Vec<Option<f64>> {
         return vec![None; STEPS.len()];
     };
     let ms = |d: &Option<prost_types::Duration>| {
-        d.and_then(crate::duration_from_proto)
+        d.and_then(landing_client::duration_from_proto)
             .map(|d: Duration| d.as_secs_f64() * 1e3)
     };
     vec![
@@ -166,7 +168,7 @@ pub async fn run(
     scenarios: &[Scenario],
     config: &EvalConfig,
     mut progress: impl FnMut(usize, usize),
-) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), ClientError> {
+) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), EvalError> {
     let info = client.info().await?;
     let precision = config
         .options
@@ -212,7 +214,7 @@ pub async fn run(
                         error: e.to_string(),
                     })
                 }
-                Err(e) => return Err(e),
+                Err(e) => return Err(e.into()),
             }
         }
         progress(i + 1, scenarios.len());
@@ -227,15 +229,15 @@ fn write_overlay(
     mode: Mode,
     result: &FrameResult,
     record: &FrameRecord,
-) -> Result<(), ClientError> {
-    std::fs::create_dir_all(dir).map_err(|e| ClientError::Io {
+) -> Result<(), EvalError> {
+    std::fs::create_dir_all(dir).map_err(|e| EvalError::Io {
         path: dir.display().to_string(),
         source: e,
     })?;
     let sites: Vec<Site> = result.sites.iter().map(site_of).collect();
     let title = format!("{} {}", scenario.name, mode.name());
     if let Some(canvas) =
-        super::overlay::draw_overlay(&title, &scenario.roofs, &sites, &record.eval.sites)
+        crate::overlay::draw_overlay(&title, &scenario.roofs, &sites, &record.eval.sites)
     {
         let stem: String = scenario
             .name
@@ -250,7 +252,7 @@ fn write_overlay(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{FrameBuilder, PointCloudBuilder};
+    use landing_client::{FrameBuilder, PointCloudBuilder};
     use landing_proto::v1::{LinearRing, Vector3};
 
     #[test]

@@ -1,4 +1,4 @@
-//! `landing eval`: landing quality against simulator ground truth.
+//! Landing quality against simulator ground truth: what `landing eval` runs.
 //!
 //! For every frame of a recording with ground truth and every returned site, the evaluation
 //! checks that the safe circle is clear of every true obstacle footprint and inside the roof
@@ -10,11 +10,13 @@
 //!
 //! The metrics are pure functions ([`metrics::evaluate_frame`]) on domain types
 //! ([`metrics::Site`], [`metrics::RoofTruth`]); [`report::summarize`] aggregates them and
-//! [`report::write_report`] writes the Markdown, JSON and PNG charts.
+//! [`report::write_report`] writes the Markdown, JSON and PNG charts; [`run::run`] sends the
+//! scenarios ([`truth::load_scenarios`], read with `landing_recording`) through the real service
+//! with the SDK. The crate scores answers; it never re-implements the pipeline.
 //!
 //! ```
-//! use landing_client::eval::geom::Polygon2;
-//! use landing_client::eval::metrics::{MetricsParams, Obstacle, RoofTruth, Site, evaluate_frame};
+//! use landing_eval::geom::Polygon2;
+//! use landing_eval::metrics::{MetricsParams, Obstacle, RoofTruth, Site, evaluate_frame};
 //!
 //! // A 20 × 10 m roof with a 2 × 2 m AC unit; the site's circle overlaps the unit by 1 m.
 //! let roof = RoofTruth {
@@ -41,7 +43,8 @@
 //! assert!(eval.roofs[0].iou > 0.97); // the polygon only misses the 4 m² unit
 //! ```
 
-pub mod cli;
+#![forbid(unsafe_code)]
+
 pub mod geom;
 pub mod metrics;
 pub mod overlay;
@@ -53,3 +56,32 @@ pub mod truth;
 
 pub use metrics::{MetricsParams, evaluate_frame};
 pub use report::{FrameRecord, Mode, Summary, Targets, summarize, write_report};
+
+/// Everything that can go wrong in an evaluation. Messages name the file or value at fault.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum EvalError {
+    /// The service or the SDK failed.
+    #[error(transparent)]
+    Client(#[from] landing_client::ClientError),
+    /// A scenario recording could not be read.
+    #[error("recording `{path}`: {source}")]
+    Recording {
+        path: String,
+        #[source]
+        source: landing_recording::Error,
+    },
+    /// A report file or folder could not be written.
+    #[error("cannot write `{path}`: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    /// A chart could not be encoded.
+    #[error("image `{path}`: {reason}")]
+    Image { path: String, reason: String },
+    /// An input is unusable (no ground truth, a frame without a cloud, ...).
+    #[error("invalid `{field}`: {reason}")]
+    Invalid { field: &'static str, reason: String },
+}

@@ -5,9 +5,9 @@
 
 use image::Rgb;
 
-use super::geom::{Grid, Mask, P2, bounds_of};
-use super::metrics::{RoofTruth, Site, SiteEval, hidden_mask, landable_mask};
-use super::plot::Canvas;
+use crate::geom::{Grid, Mask, P2, bounds_of};
+use crate::metrics::{RoofTruth, Site, SiteEval, hidden_mask, landable_mask};
+use crate::plot::Canvas;
 
 const MARGIN: i64 = 20;
 const LEGEND: i64 = 40;
@@ -123,9 +123,9 @@ pub fn draw_overlay(
 
 #[cfg(test)]
 mod tests {
-    use super::super::geom::Polygon2;
-    use super::super::metrics::{MetricsParams, Obstacle, judge_site};
     use super::*;
+    use crate::geom::Polygon2;
+    use crate::metrics::{MetricsParams, Obstacle, judge_site};
 
     #[test]
     fn overlay_shows_truth_and_an_unsafe_circle() {

@@ -6,10 +6,10 @@ use std::path::{Path, PathBuf};
 
 use landing_proto::v1::{CameraImage, Frame, GroundTruth, LinearRing, SemanticClass};
 
-use super::geom::{P2, Polygon2, bounds_of, prism_shadow};
-use super::metrics::{Obstacle, RoofTruth};
-use super::run::Scenario;
-use crate::ClientError;
+use crate::EvalError;
+use crate::geom::{P2, Polygon2, bounds_of, prism_shadow};
+use crate::metrics::{Obstacle, RoofTruth};
+use crate::run::Scenario;
 
 /// Parapet walls of the simulated city are this thick at least and at most, metres. The ground
 /// truth gives the parapet's height, not its thickness; the thickness is read off the landable
@@ -17,15 +17,14 @@ use crate::ClientError;
 pub const PARAPET_THICKNESS_M: (f64, f64) = (0.2, 0.45);
 
 /// Reads every file and pairs frames with their ground truth; frames without truth are skipped.
-pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, ClientError> {
+pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, EvalError> {
     let mut out = Vec::new();
     for f in files {
-        let recorded =
-            landing_sim::recording::read_recording(f).map_err(|e| ClientError::Recording {
-                path: f.display().to_string(),
-                reason: e.to_string(),
-            })?;
-        let name = super::cli::short_name(f);
+        let recorded = landing_recording::read(f).map_err(|source| EvalError::Recording {
+            path: f.display().to_string(),
+            source,
+        })?;
+        let name = short_name(f);
         for r in recorded {
             if let Some(truth) = r.truth {
                 out.push(scenario_of(&name, r.frame, &truth, r.labels));
@@ -33,12 +32,48 @@ pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, ClientError> {
         }
     }
     if out.is_empty() {
-        return Err(ClientError::InvalidInput {
+        return Err(EvalError::Invalid {
             field: "recordings",
             reason: format!("no frame with ground truth (`/ground_truth`) in {files:?}"),
         });
     }
     Ok(out)
+}
+
+/// The MCAP files named, with folders expanded to their `*.mcap` files in name order.
+pub fn recording_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, EvalError> {
+    let mut out = Vec::new();
+    for p in paths {
+        if p.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
+                .map_err(|e| EvalError::Io {
+                    path: p.display().to_string(),
+                    source: e,
+                })?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
+                .collect();
+            found.sort();
+            out.extend(found);
+        } else {
+            out.push(p.clone());
+        }
+    }
+    if out.is_empty() {
+        return Err(EvalError::Invalid {
+            field: "recordings",
+            reason: format!("no .mcap files in {paths:?}"),
+        });
+    }
+    Ok(out)
+}
+
+/// The file name of `path`, which names its scenarios in the report.
+pub fn short_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
 }
 
 fn ring(r: Option<&LinearRing>) -> Vec<P2> {
@@ -124,7 +159,7 @@ pub fn scenario_of(
 /// The LiDAR's origin in the world, where the frame's cloud has a pose.
 fn sensor_position(frame: &Frame) -> Option<[f64; 3]> {
     let pose = frame.point_cloud.as_ref()?.pose.as_ref()?;
-    Some(crate::RigidTransform::from_pose(pose).translation)
+    Some(landing_client::RigidTransform::from_pose(pose).translation)
 }
 
 /// The shadows, under a light at `eye`, of a roof's obstacles (solid boxes on their footprints:
@@ -235,7 +270,7 @@ pub fn interior_of(outline: &Polygon2, landable: &Polygon2, parapet_height_m: f6
 }
 
 /// Convenience for tests and tools: the scenarios of one file.
-pub fn load_file(path: &Path) -> Result<Vec<Scenario>, ClientError> {
+pub fn load_file(path: &Path) -> Result<Vec<Scenario>, EvalError> {
     load_scenarios(&[path.to_path_buf()])
 }
 

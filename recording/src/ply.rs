@@ -1,10 +1,10 @@
 //! The one PLY reader and writer of the workspace (ascii and binary little-endian point clouds),
-//! used by the simulator's `ply` command, the server's offline `detect --points` and the client's
+//! used by the simulator's `ply` command, the server's offline `detect --points` and the CLI's
 //! `landing detect FILE.ply`.
 //!
 //! Only the `vertex` element is kept: its `x`, `y`, `z` properties (any scalar type, usually
 //! `float` or `double`) and an optional per-point class from a `class` or `label` property of an
-//! integer type (values 0..=255, see [`landing_geometry::SemanticClass`]). Every other property
+//! integer type (values 0..=255, `landing.v1.SemanticClass` numbers). Every other property
 //! and every other element is parsed and skipped, list properties included. Big-endian files are
 //! rejected with a clear message rather than misread. Errors ([`PlyError`]) name the header line,
 //! or the element, row and property, that is wrong.
@@ -12,7 +12,7 @@
 //! ```
 //! let text = b"ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n\
 //! property float z\nproperty uchar class\nend_header\n0 0 1 4\n1 0 1 4\n";
-//! let cloud = landing_sim::ply::parse(text).unwrap();
+//! let cloud = landing_recording::ply::parse(text).unwrap();
 //! assert_eq!(cloud.points, vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]);
 //! assert_eq!(cloud.classes, Some(vec![4, 4]));
 //! ```
@@ -87,7 +87,7 @@ pub fn write_binary(cloud: &PlyCloud) -> Vec<u8> {
 }
 
 /// [`write_binary`] with an optional `comment` line in the header.
-pub(crate) fn write_binary_with_comment(cloud: &PlyCloud, comment: Option<&str>) -> Vec<u8> {
+pub fn write_binary_with_comment(cloud: &PlyCloud, comment: Option<&str>) -> Vec<u8> {
     let mut out = header_text(cloud, "binary_little_endian", comment).into_bytes();
     for (i, p) in cloud.points.iter().enumerate() {
         for c in p {

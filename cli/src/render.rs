@@ -5,8 +5,7 @@
 use image::{Rgb, RgbImage};
 use landing_proto::v1::{Frame, FrameResult, LinearRing, camera_image};
 
-use crate::frame::RigidTransform;
-use crate::{ClientError, unpack_point_cloud};
+use landing_client::{ClientError, RigidTransform, unpack_point_cloud};
 
 /// Fill colour of landing polygons.
 pub const POLYGON_GREEN: Rgb<u8> = Rgb([40, 220, 60]);
@@ -291,7 +290,7 @@ pub fn render(
 /// Decodes the frame's camera image to RGB8.
 pub fn decode_camera_image(img: &landing_proto::v1::CameraImage) -> Result<RgbImage, ClientError> {
     let err = |reason: String| ClientError::Image {
-        what: "frame.image".into(),
+        what: "frame.image",
         reason,
     };
     match img.image.as_ref() {
@@ -456,7 +455,7 @@ fn star(img: &mut RgbImage, u: f64, v: f64, r: f64, x_lo: u32, x_hi: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{
+    use landing_client::{
         FrameBuilder, ImageData, PointCloudBuilder, camera_image, intrinsics_from_fov, pose,
     };
     use landing_proto::v1::{LandingSite, Polygon, Vector3};

@@ -10,10 +10,10 @@ fn main() -> ExitCode {
         Ok(r) => r,
         Err(e) => {
             eprintln!("landing: cannot start the async runtime: {e}");
-            return ExitCode::from(landing_client::cli::exit::ERROR);
+            return ExitCode::from(landing_cli::exit::ERROR);
         }
     };
     let mut stdout = std::io::stdout();
-    let code = runtime.block_on(landing_client::cli::run(std::env::args_os(), &mut stdout));
+    let code = runtime.block_on(landing_cli::run(std::env::args_os(), &mut stdout));
     ExitCode::from(code)
 }

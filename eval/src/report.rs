@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
-use super::metrics::{FrameEval, Verdict};
-use super::plot::{BarGroup, bars_log, box_plot};
-use super::stats::{MeanCi, bootstrap_ci95, mean_ci95, median};
-use crate::ClientError;
+use crate::EvalError;
+use crate::metrics::{FrameEval, Verdict};
+use crate::plot::{BarGroup, bars_log, box_plot};
+use crate::stats::{MeanCi, bootstrap_ci95, mean_ci95, median};
 
 /// Where the point classes come from: the three modes the evaluation compares.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize)]
@@ -707,7 +707,7 @@ impl Summary {
         &self,
         dir: &Path,
         records: &[FrameRecord],
-    ) -> Result<Vec<(&'static str, String)>, ClientError> {
+    ) -> Result<Vec<(&'static str, String)>, EvalError> {
         let names: Vec<&str> = self.modes.iter().map(|m| m.mode.name()).collect();
         let groups: Vec<BarGroup> = STEPS
             .iter()
@@ -729,8 +729,8 @@ impl Summary {
         let mut written = Vec::new();
         let mut save = |title: &'static str,
                         file: &str,
-                        canvas: super::plot::Canvas|
-         -> Result<(), ClientError> {
+                        canvas: crate::plot::Canvas|
+         -> Result<(), EvalError> {
             canvas.save(&dir.join(file))?;
             written.push((title, file.to_string()));
             Ok(())
@@ -864,9 +864,9 @@ pub fn write_report(
     records: &[FrameRecord],
     targets: &Targets,
     gate: &[Mode],
-) -> Result<String, ClientError> {
+) -> Result<String, EvalError> {
     let io = |path: PathBuf| {
-        move |e: std::io::Error| ClientError::Io {
+        move |e: std::io::Error| EvalError::Io {
             path: path.display().to_string(),
             source: e,
         }
@@ -877,7 +877,7 @@ pub fn write_report(
     let md = summary.to_markdown(targets, gate, &chart_refs);
     std::fs::write(dir.join("summary.md"), &md).map_err(io(dir.join("summary.md")))?;
     let json = serde_json::json!({ "summary": summary, "records": records });
-    let text = serde_json::to_string_pretty(&json).map_err(|e| ClientError::InvalidInput {
+    let text = serde_json::to_string_pretty(&json).map_err(|e| EvalError::Invalid {
         field: "results",
         reason: e.to_string(),
     })?;
@@ -887,8 +887,8 @@ pub fn write_report(
 
 #[cfg(test)]
 mod tests {
-    use super::super::metrics::{ObstacleEval, RoofEval, SiteEval};
     use super::*;
+    use crate::metrics::{ObstacleEval, RoofEval, SiteEval};
 
     fn record(mode: Mode, frame: &str, verdict: Verdict, iou: f64, ratio: f64) -> FrameRecord {
         FrameRecord {

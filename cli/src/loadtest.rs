@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use landing_proto::v1::Frame;
 
-use crate::{ClientError, FrameOutcome, LandingClient, StreamConfig};
+use landing_client::{ClientError, FrameOutcome, LandingClient, StreamConfig};
 
 /// What to run.
 #[derive(Debug, Clone)]

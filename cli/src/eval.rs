@@ -6,11 +6,12 @@ use std::path::{Path, PathBuf};
 use clap::Args;
 use landing_proto::v1::PipelineOptions;
 
-use super::report::{Mode, Targets, summarize, write_report};
-use super::run::{EvalConfig, fill_scanned_regions, run};
-use super::truth::load_scenarios;
-use crate::cli::{CliError, ConnectionArgs, client_config, exit};
-use crate::{ClientError, LandingClient};
+use landing_client::LandingClient;
+use landing_eval::report::{Mode, Targets, summarize, write_report};
+use landing_eval::run::{EvalConfig, fill_scanned_regions, run};
+use landing_eval::truth::{load_scenarios, recording_files};
+
+use crate::args::{CliError, ConnectionArgs, client_config, exit};
 
 /// Exit code of `landing eval` when a gated mode returned an unsafe site (or answered no frame).
 pub const EXIT_UNSAFE: u8 = 7;
@@ -183,7 +184,7 @@ pub async fn eval_cmd(
             max_triangle_edge_m: args.max_triangle_edge,
             ..Default::default()
         },
-        metrics: super::MetricsParams {
+        metrics: landing_eval::MetricsParams {
             cell_m: args.cell,
             min_truth_radius_m: args.min_truth_radius,
             ..Default::default()
@@ -233,40 +234,4 @@ pub async fn eval_cmd(
             .is_none_or(|m| m.unsafe_sites() > 0 || m.frames == 0)
     });
     Ok(if gate_failed { EXIT_UNSAFE } else { exit::OK })
-}
-
-/// The MCAP files named, with folders expanded to their `*.mcap` files in name order.
-pub fn recording_files(paths: &[PathBuf]) -> Result<Vec<PathBuf>, ClientError> {
-    let mut out = Vec::new();
-    for p in paths {
-        if p.is_dir() {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| ClientError::Io {
-                    path: p.display().to_string(),
-                    source: e,
-                })?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.extension().is_some_and(|x| x == "mcap"))
-                .collect();
-            found.sort();
-            out.extend(found);
-        } else {
-            out.push(p.clone());
-        }
-    }
-    if out.is_empty() {
-        return Err(ClientError::InvalidInput {
-            field: "recordings",
-            reason: format!("no .mcap files in {paths:?}"),
-        });
-    }
-    Ok(out)
-}
-
-/// File name of `path` for scenario names.
-pub(crate) fn short_name(path: &Path) -> String {
-    path.file_name().map_or_else(
-        || path.display().to_string(),
-        |n| n.to_string_lossy().into_owned(),
-    )
 }

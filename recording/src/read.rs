@@ -1,0 +1,85 @@
+//! Reading the frames of a recording, each with the ground truth and label image logged with it.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use landing_proto::v1;
+use prost::Message;
+
+use crate::{Error, FRAME_SCHEMA, LABELS_SCHEMA, LABELS_TOPIC, TRUTH_SCHEMA};
+
+/// One frame of a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RecordedFrame {
+    /// The topic it was recorded on.
+    pub topic: String,
+    /// MCAP log time, nanoseconds.
+    pub log_time_ns: u64,
+    /// The frame.
+    pub frame: v1::Frame,
+    /// The ground truth logged at the same time, if any.
+    pub truth: Option<v1::GroundTruth>,
+    /// The label image logged at the same time on [`LABELS_TOPIC`], if any.
+    pub labels: Option<v1::CameraImage>,
+}
+
+/// Reads every `landing.v1.Frame` of the MCAP file at `path`, in file order.
+pub fn read(path: &Path) -> Result<Vec<RecordedFrame>, Error> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    read_bytes(&bytes)
+}
+
+/// Like [`read`], from the bytes of a whole file.
+pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
+    let mut frames = Vec::new();
+    let mut truths = BTreeMap::new();
+    let mut labels = BTreeMap::new();
+    for message in mcap::MessageStream::new(bytes)? {
+        let message = message?;
+        let schema = message
+            .channel
+            .schema
+            .as_ref()
+            .filter(|s| s.encoding == "protobuf")
+            .map(|s| s.name.as_str());
+        let topic = &message.channel.topic;
+        let decode_error = |schema: &'static str, e: prost::DecodeError| Error::Decode {
+            topic: topic.clone(),
+            sequence: message.sequence,
+            schema,
+            reason: e.to_string(),
+        };
+        match schema {
+            Some(FRAME_SCHEMA) => {
+                let frame = v1::Frame::decode(&message.data[..])
+                    .map_err(|e| decode_error(FRAME_SCHEMA, e))?;
+                frames.push(RecordedFrame {
+                    topic: topic.clone(),
+                    log_time_ns: message.log_time,
+                    frame,
+                    truth: None,
+                    labels: None,
+                });
+            }
+            Some(TRUTH_SCHEMA) => {
+                let truth = v1::GroundTruth::decode(&message.data[..])
+                    .map_err(|e| decode_error(TRUTH_SCHEMA, e))?;
+                truths.insert(message.log_time, truth);
+            }
+            Some(LABELS_SCHEMA) if topic == LABELS_TOPIC => {
+                let image = v1::CameraImage::decode(&message.data[..])
+                    .map_err(|e| decode_error(LABELS_SCHEMA, e))?;
+                labels.insert(message.log_time, image);
+            }
+            _ => {}
+        }
+    }
+    if frames.is_empty() {
+        return Err(Error::NoFrames);
+    }
+    for f in &mut frames {
+        f.truth = truths.remove(&f.log_time_ns);
+        f.labels = labels.remove(&f.log_time_ns);
+    }
+    Ok(frames)
+}

@@ -1,0 +1,145 @@
+//! Recordings as other tools write them, the simulator's committed sample, and answers written
+//! back: what every reader of the workspace relies on.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use landing_proto::v1::{self, Frame, StreamLandingSitesResponse};
+use landing_recording::{Error, FRAME_SCHEMA, RESULT_TOPIC, Writer, read, read_bytes};
+use prost::Message;
+
+/// Writes frames the way another recorder would: its own topic name, and an unrelated JSON
+/// channel in between.
+fn foreign_recording(frames: &[Frame]) -> Vec<u8> {
+    let mut w = mcap::Writer::new(std::io::Cursor::new(Vec::new())).unwrap();
+    let s = w
+        .add_schema(FRAME_SCHEMA, "protobuf", landing_proto::FILE_DESCRIPTOR_SET)
+        .unwrap();
+    let c = w
+        .add_channel(s, "/drone/frame", "protobuf", &BTreeMap::new())
+        .unwrap();
+    let other = w
+        .add_channel(0, "/truth", "json", &BTreeMap::new())
+        .unwrap();
+    for (i, f) in frames.iter().enumerate() {
+        let h = |channel_id| mcap::records::MessageHeader {
+            channel_id,
+            sequence: i as u32,
+            log_time: i as u64 * 100_000_000,
+            publish_time: 0,
+        };
+        w.write_to_known_channel(&h(c), &f.encode_to_vec()).unwrap();
+        w.write_to_known_channel(&h(other), b"{}").unwrap();
+    }
+    w.finish().unwrap();
+    w.into_inner().into_inner()
+}
+
+#[test]
+fn reads_only_frame_messages_in_order() {
+    let frames: Vec<Frame> = (0..3)
+        .map(|i| Frame {
+            sequence: i,
+            drone_id: "d".into(),
+            ..Default::default()
+        })
+        .collect();
+    let read = read_bytes(&foreign_recording(&frames)).unwrap();
+    assert_eq!(read.len(), 3);
+    assert_eq!(read[2].frame, frames[2]);
+    assert_eq!(read[1].log_time_ns, 100_000_000);
+    assert_eq!(read[0].topic, "/drone/frame");
+    assert!(read.iter().all(|r| r.truth.is_none() && r.labels.is_none()));
+}
+
+#[test]
+fn the_simulators_truth_and_labels_come_with_their_frames() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../samples/rooftops.mcap");
+    let read = read(&path).unwrap();
+    assert!(read.len() >= 10, "{} frames", read.len());
+    for r in &read {
+        let truth = r
+            .truth
+            .as_ref()
+            .expect("every simulated frame has ground truth");
+        assert_eq!(truth.sequence, r.frame.sequence);
+        let labels = r.labels.as_ref().expect("every simulated frame has labels");
+        let image = r.frame.image.as_ref().unwrap();
+        // Same camera, same moment: the labels are the image's.
+        assert_eq!(labels.calibration, image.calibration);
+        assert_eq!(labels.pose, image.pose);
+        assert_eq!(labels.timestamp, r.frame.timestamp);
+    }
+    let sequences: Vec<u64> = read.iter().map(|r| r.frame.sequence).collect();
+    assert!(sequences.windows(2).all(|w| w[0] < w[1]), "{sequences:?}");
+}
+
+#[test]
+fn a_file_without_frames_and_a_file_that_is_not_mcap_are_errors() {
+    let err = read_bytes(&foreign_recording(&[])).unwrap_err();
+    assert!(matches!(err, Error::NoFrames), "{err}");
+    assert!(err.to_string().contains("no `landing.v1.Frame`"), "{err}");
+    assert!(matches!(
+        read_bytes(b"not an mcap file"),
+        Err(Error::Mcap(_))
+    ));
+    let err = read(Path::new("/nonexistent/rec.mcap")).unwrap_err();
+    assert!(err.to_string().contains("/nonexistent/rec.mcap"), "{err}");
+}
+
+#[test]
+fn a_message_that_is_not_its_schema_names_topic_and_sequence() {
+    let mut w = mcap::Writer::new(std::io::Cursor::new(Vec::new())).unwrap();
+    let s = w
+        .add_schema(FRAME_SCHEMA, "protobuf", landing_proto::FILE_DESCRIPTOR_SET)
+        .unwrap();
+    let c = w
+        .add_channel(s, "/f", "protobuf", &BTreeMap::new())
+        .unwrap();
+    let header = mcap::records::MessageHeader {
+        channel_id: c,
+        sequence: 9,
+        log_time: 1,
+        publish_time: 1,
+    };
+    w.write_to_known_channel(&header, &[0xFF, 0xFF, 0xFF])
+        .unwrap();
+    w.finish().unwrap();
+    let err = read_bytes(&w.into_inner().into_inner()).unwrap_err();
+    let text = err.to_string();
+    assert!(
+        text.contains("message 9 on `/f`") && text.contains(FRAME_SCHEMA),
+        "{text}"
+    );
+}
+
+#[test]
+fn written_results_read_back() {
+    let mut w = Writer::new(std::io::Cursor::new(Vec::new()), "test").unwrap();
+    let response = StreamLandingSitesResponse {
+        sequence: 4,
+        outcome: Some(v1::stream_landing_sites_response::Outcome::Result(
+            v1::FrameResult {
+                sequence: 4,
+                ..Default::default()
+            },
+        )),
+    };
+    w.write_result(42, &response).unwrap();
+    w.write_result(43, &response).unwrap();
+    let bytes = w.finish().unwrap().into_inner();
+    let msgs: Vec<_> = mcap::MessageStream::new(&bytes)
+        .unwrap()
+        .map(|m| m.unwrap())
+        .collect();
+    assert_eq!(msgs.len(), 2);
+    assert_eq!((msgs[0].log_time, msgs[1].log_time), (42, 43));
+    assert_eq!((msgs[0].sequence, msgs[1].sequence), (1, 2));
+    assert_eq!(msgs[0].channel.topic, RESULT_TOPIC);
+    assert_eq!(
+        StreamLandingSitesResponse::decode(&msgs[0].data[..]).unwrap(),
+        response
+    );
+    // A file of answers alone holds no frame to replay.
+    assert!(matches!(read_bytes(&bytes), Err(Error::NoFrames)));
+}
