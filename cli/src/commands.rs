@@ -394,6 +394,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         overflow_policy: a.overflow.policy(),
         options: Some(a.pipeline.options()),
         max_in_flight: a.window.max(1),
+        fusion: None,
     };
     let summary = replay_frames(&client, &frames, config, a.rate, |rec, item| {
         if cli.json {
@@ -535,6 +536,7 @@ async fn loadtest(
             overflow_policy: a.overflow.policy(),
             options: Some(a.pipeline.options()),
             max_in_flight: a.window.max(1),
+            fusion: None,
         },
     };
     let show = std::io::stderr().is_terminal();

@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use clap::Args;
-use landing_proto::v1::PipelineOptions;
+use landing_proto::v1::{FusionOptions, PipelineOptions};
 
 use landing_client::LandingClient;
 use landing_eval::report::{Mode, Targets, summarize, write_report};
@@ -62,6 +62,12 @@ pub struct EvalArgs {
     /// Also draw every frame top-down into `<out>/frames/` (frames with an unsafe site always are).
     #[arg(long)]
     pub overlays: bool,
+    /// Also send each approach (one recording's frames, in sequence order) as one fused stream
+    /// per mode, and report the fused answers beside the single-frame ones, with the approach
+    /// breakdown (last quarter, time since the start, altitude). The gate then also fails on an
+    /// unsafe fused site.
+    #[arg(long)]
+    pub stream: bool,
 }
 
 /// The built-in scenario sets.
@@ -145,7 +151,8 @@ fn parse_mode(s: &str) -> Result<Mode, String> {
 }
 
 /// Runs `landing eval`: prints the table (or JSON), writes the report folder, and returns
-/// [`EXIT_UNSAFE`] when a gated mode had an unsafe site or answered no frame.
+/// [`EXIT_UNSAFE`] when a gated mode had an unsafe site or answered no frame (in its single-frame
+/// or, with `--stream`, its fused answers).
 pub async fn eval_cmd(
     connection: &ConnectionArgs,
     args: &EvalArgs,
@@ -191,6 +198,11 @@ pub async fn eval_cmd(
         },
         overlay_dir: Some(args.out.join("frames")),
         overlay_all: args.overlays,
+        // The server's defaults for everything but `enabled`.
+        stream: args.stream.then(|| FusionOptions {
+            enabled: true,
+            ..Default::default()
+        }),
         ..Default::default()
     };
     for s in &mut scenarios {
@@ -226,12 +238,9 @@ pub async fn eval_cmd(
         writeln!(out, "report: {}", args.out.join("summary.md").display()).map_err(io)?;
     }
     let _ = md;
-    let gate_failed = args.gate.iter().any(|g| {
-        summary
-            .modes
-            .iter()
-            .find(|m| m.mode == *g)
-            .is_none_or(|m| m.unsafe_sites() > 0 || m.frames == 0)
-    });
-    Ok(if gate_failed { EXIT_UNSAFE } else { exit::OK })
+    Ok(if summary.gate_failed(&args.gate) {
+        EXIT_UNSAFE
+    } else {
+        exit::OK
+    })
 }

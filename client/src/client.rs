@@ -8,8 +8,9 @@ use std::time::{Duration, Instant};
 
 use landing_proto::v1::landing_service_client::LandingServiceClient;
 use landing_proto::v1::{
-    DetectLandingSitesRequest, Frame, FrameResult, GetServiceInfoRequest, OverflowPolicy,
-    PipelineOptions, ServiceInfo, StreamLandingSitesRequest, StreamLandingSitesResponse,
+    DetectLandingSitesRequest, Frame, FrameResult, FusionOptions, GetServiceInfoRequest,
+    OverflowPolicy, PipelineOptions, ServiceInfo, StreamLandingSitesRequest,
+    StreamLandingSitesResponse,
 };
 use tokio::sync::{Semaphore, mpsc};
 use tokio_stream::Stream;
@@ -177,6 +178,7 @@ impl LandingClient {
             pending: pending.clone(),
             window: window.clone(),
             first: true,
+            reset_next: false,
             config,
         };
         let results = ResultStream {
@@ -363,6 +365,11 @@ pub struct StreamConfig {
     pub options: Option<PipelineOptions>,
     /// At most this many frames are sent and unanswered at once.
     pub max_in_flight: usize,
+    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
+    /// (sent with the first frame; `None` judges every frame alone). The map lives in the server
+    /// process that holds the stream: when the stream breaks and the drone reconnects, possibly
+    /// to another replica after a drain, fusion starts over from the next frame.
+    pub fusion: Option<FusionOptions>,
 }
 
 impl Default for StreamConfig {
@@ -371,6 +378,7 @@ impl Default for StreamConfig {
             overflow_policy: OverflowPolicy::Block,
             options: None,
             max_in_flight: 16,
+            fusion: None,
         }
     }
 }
@@ -385,6 +393,8 @@ pub struct FrameSender {
     pending: Pending,
     window: Arc<Semaphore>,
     first: bool,
+    /// The next frame asks for the fusion map to start over.
+    reset_next: bool,
     config: StreamConfig,
 }
 
@@ -422,18 +432,28 @@ impl FrameSender {
             pending.push_back((seq, Instant::now()));
         }
         permit.forget();
-        let overflow_policy = if self.first {
-            self.config.overflow_policy as i32
+        let (overflow_policy, fusion) = if self.first {
+            (
+                self.config.overflow_policy as i32,
+                self.config.fusion.clone(),
+            )
         } else {
-            0
+            (0, None)
         };
         self.first = false;
         slot.send(StreamLandingSitesRequest {
             frame: Some(frame),
             options,
             overflow_policy,
+            fusion,
+            reset_fusion: std::mem::take(&mut self.reset_next),
         });
         Ok(())
+    }
+
+    /// Asks the server to start the stream's fusion map over at the next frame sent.
+    pub fn reset_fusion(&mut self) {
+        self.reset_next = true;
     }
 
     /// Frames sent and not yet answered.

@@ -8,11 +8,21 @@
 //! three modes side by side on the same frames ([`Mode`]): geometry only, the server's
 //! segmentation model, and the cloud's true classes.
 //!
+//! With `--stream` ([`run::EvalConfig::stream`]) each approach (the frames of one recording, in
+//! sequence order) is also sent as one fused stream per mode, and the report sets the fused
+//! answers (columns `<mode> fused`) beside the single-frame ones. A fused answer is judged
+//! against what the approach has scanned so far ([`approach::fused_roofs`]: the convex hull of
+//! the union of every frame's scan on each roof up to this one), a single-frame answer against
+//! its own frame's scan; the safety rules are the same. The approach breakdown
+//! ([`approach::breakdown`]) splits every column by the last quarter of each approach, time since
+//! the approach started and the camera's height above the target roof.
+//!
 //! The metrics are pure functions ([`metrics::evaluate_frame`]) on domain types
 //! ([`metrics::Site`], [`metrics::RoofTruth`]); [`report::summarize`] aggregates them and
 //! [`report::write_report`] writes the Markdown, JSON and PNG charts; [`run::run`] sends the
 //! scenarios ([`truth::load_scenarios`], read with `landing_recording`) through the real service
-//! with the SDK. The crate scores answers; it never re-implements the pipeline.
+//! with the SDK (unary calls, then fused streams). The crate scores answers; it never
+//! re-implements the pipeline, and fusion is the server's.
 //!
 //! ```
 //! use landing_eval::geom::Polygon2;
@@ -45,6 +55,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod approach;
 pub mod geom;
 pub mod metrics;
 pub mod overlay;

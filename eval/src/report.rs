@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use serde::Serialize;
 
 use crate::EvalError;
+use crate::approach::{ApproachFrame, breakdown};
 use crate::metrics::{FrameEval, Verdict};
 use crate::plot::{BarGroup, bars_log, box_plot};
 use crate::stats::{MeanCi, bootstrap_ci95, mean_ci95, median};
@@ -68,12 +69,21 @@ pub const STEPS: [&str; 10] = [
     "total",
 ];
 
-/// One frame processed in one mode.
+/// One frame processed in one mode, alone or as part of its approach's fused stream.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FrameRecord {
     pub mode: Mode,
     /// Recording file and frame sequence, e.g. `scenarios/w3.mcap#12`.
     pub frame: String,
+    /// Where the frame stands in its approach (flattened into the record's JSON).
+    #[serde(flatten)]
+    pub at: ApproachFrame,
+    /// Whether the answer came from the approach's fused stream (`--stream`), judged against the
+    /// scans so far ([`crate::approach::fused_roofs`]), rather than from the frame alone.
+    pub fused: bool,
+    /// The server's account of the map a fused answer came from.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fusion: Option<FusionInfo>,
     /// Hard-case tags of the scenario (`tarp`, `water_tower`, `parapet_edge`, ...).
     pub tags: Vec<String>,
     /// The server's per-step times, milliseconds, in [`STEPS`] order (`None` for a step that did
@@ -84,12 +94,56 @@ pub struct FrameRecord {
     pub eval: FrameEval,
 }
 
+/// What a fused answer was computed from (`landing.v1.FusionSummary`).
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
+pub struct FusionInfo {
+    /// Frames fused into the map since it (re)started, this one included.
+    pub frames: u32,
+    /// Map points the answer was computed from.
+    pub points: u32,
+    /// Cells the map holds.
+    pub cells: u32,
+    /// Frames whose keep-out footprints the answer kept clear of.
+    pub keep_out_frames: u32,
+    /// Why the map started over at this frame.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub reset_reason: String,
+}
+
+impl From<&landing_proto::v1::FusionSummary> for FusionInfo {
+    fn from(f: &landing_proto::v1::FusionSummary) -> Self {
+        Self {
+            frames: f.frames,
+            points: f.points,
+            cells: f.cells,
+            keep_out_frames: f.keep_out_frames,
+            reset_reason: f.reset_reason.clone(),
+        }
+    }
+}
+
 /// A frame the server did not answer with a result.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct FrameFailure {
     pub mode: Mode,
     pub frame: String,
+    /// The frame was sent in its approach's fused stream.
+    #[serde(skip_serializing_if = "is_false")]
+    pub fused: bool,
     pub error: String,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
+}
+
+/// The report's name of a column: the mode, with ` fused` for its fused answers.
+pub fn column_name(mode: Mode, fused: bool) -> String {
+    if fused {
+        format!("{} fused", mode.name())
+    } else {
+        mode.name().to_string()
+    }
 }
 
 /// Per-class results of one mode.
@@ -105,7 +159,8 @@ pub struct ClassSummary {
     pub mean_covered: f64,
 }
 
-/// Results of one mode on the frames carrying one hard-case tag.
+/// Results of one column on a subset of its answers: the frames carrying one hard-case tag, or
+/// one row of the approach breakdown.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TagSummary {
     pub tag: String,
@@ -115,10 +170,14 @@ pub struct TagSummary {
     pub median_ratio: Option<f64>,
 }
 
-/// The summary of one mode.
+/// The summary of one column of the report: one mode's single-frame answers, or (with
+/// `--stream`) its fused ones.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ModeSummary {
     pub mode: Mode,
+    /// The column holds the mode's fused answers.
+    #[serde(skip_serializing_if = "is_false")]
+    pub fused: bool,
     pub frames: usize,
     pub failures: usize,
     pub sites: usize,
@@ -152,6 +211,11 @@ pub struct ModeSummary {
     pub classes: Vec<ClassSummary>,
     /// Per hard-case tag, in name order.
     pub tags: Vec<TagSummary>,
+    /// The approach breakdown ([`crate::approach::breakdown`]: all answers, the last quarter of
+    /// each approach, after the first second, time and altitude bands); empty unless the records
+    /// hold fused answers.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub breakdown: Vec<TagSummary>,
     /// Per-step server time, milliseconds, in [`STEPS`] order.
     pub steps: Vec<Option<MeanCi>>,
     pub round_trip: Option<MeanCi>,
@@ -161,6 +225,11 @@ impl ModeSummary {
     /// Sites judged unsafe: into an obstacle, past the roof edge, or off every roof.
     pub fn unsafe_sites(&self) -> usize {
         self.unsafe_obstacle + self.unsafe_outside_roof + self.off_roof
+    }
+
+    /// The column's name: [`column_name`].
+    pub fn label(&self) -> String {
+        column_name(self.mode, self.fused)
     }
 }
 
@@ -184,6 +253,8 @@ impl Default for Targets {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct UnsafeSite {
     pub mode: Mode,
+    #[serde(skip_serializing_if = "is_false")]
+    pub fused: bool,
     pub frame: String,
     pub rank: u32,
     pub radius_m: f64,
@@ -195,6 +266,7 @@ pub struct UnsafeSite {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Summary {
     pub scenarios: usize,
+    /// The columns: per mode, its single-frame answers, then its fused ones where there are.
     pub modes: Vec<ModeSummary>,
     /// Unsafe sites listed one by one, for explaining each.
     pub unsafe_list: Vec<UnsafeSite>,
@@ -222,7 +294,10 @@ pub fn class_name(class: u8) -> &'static str {
     }
 }
 
-/// Aggregates records into a summary.
+/// Aggregates records into a summary. Each mode gets a column of its single-frame answers and,
+/// when the records or failures hold fused answers of that mode (`--stream`), a column of those
+/// next to it; with fused answers anywhere, every column also gets the approach breakdown.
+/// Without fused answers the summary is the single-frame one of before streams existed.
 pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mode]) -> Summary {
     let mut scenarios: Vec<&str> = records
         .iter()
@@ -231,170 +306,33 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
         .collect();
     scenarios.sort_unstable();
     scenarios.dedup();
+    let streamed = records.iter().any(|r| r.fused);
     let mut unsafe_list = Vec::new();
     let mut out = Vec::new();
     for &mode in modes {
-        let recs: Vec<&FrameRecord> = records.iter().filter(|r| r.mode == mode).collect();
-        let mut s = ModeSummary {
-            mode,
-            frames: recs.len(),
-            failures: failures.iter().filter(|f| f.mode == mode).count(),
-            sites: 0,
-            unsafe_obstacle: 0,
-            unsafe_unseen: 0,
-            unsafe_outside_roof: 0,
-            off_roof: 0,
-            unlisted_roof: 0,
-            roofs: 0,
-            roofs_without_site: 0,
-            roofs_all: 0,
-            iou_all: None,
-            ratio_median_all: None,
-            iou: None,
-            iou_median: None,
-            ratio_median: None,
-            ratio_median_ci: None,
-            ratio: None,
-            visible_iou: None,
-            visible_ratio_median: None,
-            classes: Vec::new(),
-            tags: Vec::new(),
-            steps: Vec::new(),
-            round_trip: None,
-        };
-        let mut ious = Vec::new();
-        let mut visible_ious = Vec::new();
-        let mut visible_ratios = Vec::new();
-        let mut ratios = Vec::new();
-        let mut ious_all = Vec::new();
-        let mut ratios_all = Vec::new();
-        let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
-        for r in &recs {
-            s.sites += r.eval.sites.len();
-            for site in &r.eval.sites {
-                match site.verdict {
-                    Verdict::Safe => continue,
-                    Verdict::Obstacle { seen, .. } => {
-                        s.unsafe_obstacle += 1;
-                        s.unsafe_unseen += usize::from(!seen);
-                    }
-                    Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
-                    Verdict::OffRoof => s.off_roof += 1,
-                    Verdict::UnlistedRoof => {
-                        s.unlisted_roof += 1;
-                        continue;
-                    }
-                }
-                unsafe_list.push(UnsafeSite {
-                    mode,
-                    frame: r.frame.clone(),
-                    rank: site.rank,
-                    radius_m: site.radius_m,
-                    height_above_roof_m: site.height_above_roof_m,
-                    verdict: site.verdict,
-                });
+        let has_fused = records.iter().any(|r| r.mode == mode && r.fused)
+            || failures.iter().any(|f| f.mode == mode && f.fused);
+        for fused in [false, true] {
+            if fused && !has_fused {
+                continue;
             }
-            for roof in &r.eval.roofs {
-                s.roofs_all += 1;
-                ious_all.push(roof.iou);
-                ratios_all.push(roof.radius_ratio);
-                if !roof.target {
-                    continue;
-                }
-                s.roofs += 1;
-                if roof.best_safe_radius_m <= 0.0 {
-                    s.roofs_without_site += 1;
-                }
-                ious.push(roof.iou);
-                ratios.push(roof.radius_ratio);
-                visible_ious.push(roof.visible_iou);
-                visible_ratios.push(roof.visible_radius_ratio);
+            let recs: Vec<&FrameRecord> = records
+                .iter()
+                .filter(|r| r.mode == mode && r.fused == fused)
+                .collect();
+            let failed = failures
+                .iter()
+                .filter(|f| f.mode == mode && f.fused == fused)
+                .count();
+            let mut s = summarize_column(mode, fused, &recs, failed, &mut unsafe_list);
+            if streamed {
+                s.breakdown = breakdown(&recs, |r: &FrameRecord| &r.at)
+                    .into_iter()
+                    .map(|(label, rows)| subset_summary(label, &rows))
+                    .collect();
             }
-            for o in &r.eval.obstacles {
-                let e = classes.entry(o.class).or_default();
-                e.0 += 1;
-                e.1 += usize::from(o.hit);
-                e.2 += o.covered_fraction;
-            }
+            out.push(s);
         }
-        s.iou_all = mean_ci95(&ious_all);
-        s.ratio_median_all = median(&ratios_all);
-        s.iou = mean_ci95(&ious);
-        s.iou_median = median(&ious);
-        s.ratio = mean_ci95(&ratios);
-        s.ratio_median = median(&ratios);
-        s.visible_iou = mean_ci95(&visible_ious);
-        s.visible_ratio_median = median(&visible_ratios);
-        s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| {
-            median(x).unwrap_or(f64::NAN)
-        });
-        s.classes = classes
-            .into_iter()
-            .map(|(class, (n, hit, cov))| ClassSummary {
-                class,
-                name: class_name(class),
-                obstacles: n,
-                hit,
-                mean_covered: cov / n.max(1) as f64,
-            })
-            .collect();
-        let mut tag_names: Vec<&str> = recs
-            .iter()
-            .flat_map(|r| r.tags.iter().map(String::as_str))
-            .collect();
-        tag_names.sort_unstable();
-        tag_names.dedup();
-        s.tags = tag_names
-            .into_iter()
-            .map(|tag| {
-                let tagged: Vec<&&FrameRecord> = recs
-                    .iter()
-                    .filter(|r| r.tags.iter().any(|t| t == tag))
-                    .collect();
-                let ious: Vec<f64> = tagged
-                    .iter()
-                    .flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(|x| x.iou))
-                    .collect();
-                let ratios: Vec<f64> = tagged
-                    .iter()
-                    .flat_map(|r| {
-                        r.eval
-                            .roofs
-                            .iter()
-                            .filter(|x| x.target)
-                            .map(|x| x.radius_ratio)
-                    })
-                    .collect();
-                TagSummary {
-                    tag: tag.to_string(),
-                    frames: tagged.len(),
-                    unsafe_sites: tagged
-                        .iter()
-                        .map(|r| {
-                            r.eval
-                                .sites
-                                .iter()
-                                .filter(|x| x.verdict.is_unsafe())
-                                .count()
-                        })
-                        .sum(),
-                    mean_iou: mean_ci95(&ious).map(|m| m.mean),
-                    median_ratio: median(&ratios),
-                }
-            })
-            .collect();
-        s.steps = (0..STEPS.len())
-            .map(|k| {
-                mean_ci95(
-                    &recs
-                        .iter()
-                        .filter_map(|r| r.step_ms.get(k).copied().flatten())
-                        .collect::<Vec<_>>(),
-                )
-            })
-            .collect();
-        s.round_trip = mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>());
-        out.push(s);
     }
     Summary {
         scenarios: scenarios.len(),
@@ -403,6 +341,180 @@ pub fn summarize(records: &[FrameRecord], failures: &[FrameFailure], modes: &[Mo
         failures: failures.to_vec(),
     }
 }
+
+/// One column's summary of `recs`; its unsafe sites are appended to `unsafe_list`.
+fn summarize_column(
+    mode: Mode,
+    fused: bool,
+    recs: &[&FrameRecord],
+    failures: usize,
+    unsafe_list: &mut Vec<UnsafeSite>,
+) -> ModeSummary {
+    let mut s = ModeSummary {
+        mode,
+        fused,
+        frames: recs.len(),
+        failures,
+        sites: 0,
+        unsafe_obstacle: 0,
+        unsafe_unseen: 0,
+        unsafe_outside_roof: 0,
+        off_roof: 0,
+        unlisted_roof: 0,
+        roofs: 0,
+        roofs_without_site: 0,
+        roofs_all: 0,
+        iou_all: None,
+        ratio_median_all: None,
+        iou: None,
+        iou_median: None,
+        ratio_median: None,
+        ratio_median_ci: None,
+        ratio: None,
+        visible_iou: None,
+        visible_ratio_median: None,
+        classes: Vec::new(),
+        tags: Vec::new(),
+        breakdown: Vec::new(),
+        steps: Vec::new(),
+        round_trip: None,
+    };
+    let mut ious = Vec::new();
+    let mut visible_ious = Vec::new();
+    let mut visible_ratios = Vec::new();
+    let mut ratios = Vec::new();
+    let mut ious_all = Vec::new();
+    let mut ratios_all = Vec::new();
+    let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
+    for r in recs {
+        s.sites += r.eval.sites.len();
+        for site in &r.eval.sites {
+            match site.verdict {
+                Verdict::Safe => continue,
+                Verdict::Obstacle { seen, .. } => {
+                    s.unsafe_obstacle += 1;
+                    s.unsafe_unseen += usize::from(!seen);
+                }
+                Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
+                Verdict::OffRoof => s.off_roof += 1,
+                Verdict::UnlistedRoof => {
+                    s.unlisted_roof += 1;
+                    continue;
+                }
+            }
+            unsafe_list.push(UnsafeSite {
+                mode,
+                fused,
+                frame: r.frame.clone(),
+                rank: site.rank,
+                radius_m: site.radius_m,
+                height_above_roof_m: site.height_above_roof_m,
+                verdict: site.verdict,
+            });
+        }
+        for roof in &r.eval.roofs {
+            s.roofs_all += 1;
+            ious_all.push(roof.iou);
+            ratios_all.push(roof.radius_ratio);
+            if !roof.target {
+                continue;
+            }
+            s.roofs += 1;
+            if roof.best_safe_radius_m <= 0.0 {
+                s.roofs_without_site += 1;
+            }
+            ious.push(roof.iou);
+            ratios.push(roof.radius_ratio);
+            visible_ious.push(roof.visible_iou);
+            visible_ratios.push(roof.visible_radius_ratio);
+        }
+        for o in &r.eval.obstacles {
+            let e = classes.entry(o.class).or_default();
+            e.0 += 1;
+            e.1 += usize::from(o.hit);
+            e.2 += o.covered_fraction;
+        }
+    }
+    s.iou_all = mean_ci95(&ious_all);
+    s.ratio_median_all = median(&ratios_all);
+    s.iou = mean_ci95(&ious);
+    s.iou_median = median(&ious);
+    s.ratio = mean_ci95(&ratios);
+    s.ratio_median = median(&ratios);
+    s.visible_iou = mean_ci95(&visible_ious);
+    s.visible_ratio_median = median(&visible_ratios);
+    s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| {
+        median(x).unwrap_or(f64::NAN)
+    });
+    s.classes = classes
+        .into_iter()
+        .map(|(class, (n, hit, cov))| ClassSummary {
+            class,
+            name: class_name(class),
+            obstacles: n,
+            hit,
+            mean_covered: cov / n.max(1) as f64,
+        })
+        .collect();
+    let mut tag_names: Vec<&str> = recs
+        .iter()
+        .flat_map(|r| r.tags.iter().map(String::as_str))
+        .collect();
+    tag_names.sort_unstable();
+    tag_names.dedup();
+    s.tags = tag_names
+        .into_iter()
+        .map(|tag| {
+            let tagged: Vec<&FrameRecord> = recs
+                .iter()
+                .copied()
+                .filter(|r| r.tags.iter().any(|t| t == tag))
+                .collect();
+            subset_summary(tag.to_string(), &tagged)
+        })
+        .collect();
+    s.steps = (0..STEPS.len())
+        .map(|k| {
+            mean_ci95(
+                &recs
+                    .iter()
+                    .filter_map(|r| r.step_ms.get(k).copied().flatten())
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    s.round_trip = mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>());
+    s
+}
+
+/// Answers, unsafe sites, mean target IoU and median target radius ratio of a subset of records.
+pub fn subset_summary(label: String, recs: &[&FrameRecord]) -> TagSummary {
+    let targets = || {
+        recs.iter()
+            .flat_map(|r| r.eval.roofs.iter().filter(|x| x.target))
+    };
+    let ious: Vec<f64> = targets().map(|x| x.iou).collect();
+    let ratios: Vec<f64> = targets().map(|x| x.radius_ratio).collect();
+    TagSummary {
+        tag: label,
+        frames: recs.len(),
+        unsafe_sites: recs
+            .iter()
+            .map(|r| {
+                r.eval
+                    .sites
+                    .iter()
+                    .filter(|x| x.verdict.is_unsafe())
+                    .count()
+            })
+            .sum(),
+        mean_iou: mean_ci95(&ious).map(|m| m.mean),
+        median_ratio: median(&ratios),
+    }
+}
+
+/// Table rows: a label and one cell per column.
+type Rows = Vec<(String, Vec<String>)>;
 
 fn opt(v: Option<f64>, digits: usize) -> String {
     v.map_or_else(|| "-".into(), |v| format!("{v:.digits$}"))
@@ -504,23 +616,41 @@ impl Summary {
             .collect()
     }
 
-    /// Per-tag rows: "frames, unsafe, IoU, ratio" per mode.
+    /// Per-tag rows: "frames, unsafe, IoU, ratio" per column, in tag order.
     fn tag_rows(&self) -> Vec<(String, Vec<String>)> {
-        let mut tags: Vec<&str> = self
-            .modes
-            .iter()
-            .flat_map(|m| m.tags.iter().map(|t| t.tag.as_str()))
-            .collect();
-        tags.sort_unstable();
-        tags.dedup();
-        tags.into_iter()
-            .map(|tag| {
+        let mut rows = self.subset_rows(|m| &m.tags, "fr");
+        rows.sort_by(|a, b| a.0.cmp(&b.0));
+        rows
+    }
+
+    /// The approach breakdown's rows: "answers, unsafe, IoU, ratio" per column, in breakdown
+    /// order.
+    fn breakdown_rows(&self) -> Vec<(String, Vec<String>)> {
+        self.subset_rows(|m| &m.breakdown, "ans")
+    }
+
+    /// One row per subset label found in any column (in the order first met), one cell per
+    /// column.
+    fn subset_rows(
+        &self,
+        of: impl Fn(&ModeSummary) -> &[TagSummary],
+        unit: &str,
+    ) -> Vec<(String, Vec<String>)> {
+        let mut labels: Vec<&str> = Vec::new();
+        for t in self.modes.iter().flat_map(|m| of(m).iter()) {
+            if !labels.contains(&t.tag.as_str()) {
+                labels.push(&t.tag);
+            }
+        }
+        labels
+            .into_iter()
+            .map(|label| {
                 let cells = self
                     .modes
                     .iter()
-                    .map(|m| match m.tags.iter().find(|t| t.tag == tag) {
+                    .map(|m| match of(m).iter().find(|t| t.tag == label) {
                         Some(t) => format!(
-                            "{} fr, {} unsafe, IoU {}, ratio {}",
+                            "{} {unit}, {} unsafe, IoU {}, ratio {}",
                             t.frames,
                             t.unsafe_sites,
                             opt(t.mean_iou, 2),
@@ -529,7 +659,7 @@ impl Summary {
                         None => "-".into(),
                     })
                     .collect();
-                (tag.to_string(), cells)
+                (label.to_string(), cells)
             })
             .collect()
     }
@@ -550,50 +680,97 @@ impl Summary {
             .collect()
     }
 
-    /// The verdict on the targets for `mode`: one line per target.
+    /// The verdict on the targets for `mode`: one line per target and column (the
+    /// single-frame answers, then the fused ones where there are).
     pub fn target_lines(&self, mode: Mode, targets: &Targets) -> Vec<(String, bool)> {
-        let Some(m) = self.modes.iter().find(|m| m.mode == mode) else {
-            return Vec::new();
-        };
-        let iou = m.iou.map(|c| c.mean);
-        vec![
-            (
-                format!(
-                    "{}: unsafe sites = {} (target 0)",
-                    mode.name(),
-                    m.unsafe_sites()
+        let mut lines = Vec::new();
+        for m in self.modes.iter().filter(|m| m.mode == mode) {
+            let name = m.label();
+            let iou = m.iou.map(|c| c.mean);
+            lines.extend([
+                (
+                    format!("{name}: unsafe sites = {} (target 0)", m.unsafe_sites()),
+                    m.unsafe_sites() == 0 && m.frames > 0,
                 ),
-                m.unsafe_sites() == 0 && m.frames > 0,
+                (
+                    format!(
+                        "{name}: mean polygon IoU (target roofs) = {} (target >= {})",
+                        opt(iou, 3),
+                        targets.min_mean_iou
+                    ),
+                    iou.is_some_and(|v| v >= targets.min_mean_iou),
+                ),
+                (
+                    format!(
+                        "{name}: median radius ratio (target roofs) = {} (target >= {})",
+                        opt(m.ratio_median, 3),
+                        targets.min_median_ratio
+                    ),
+                    m.ratio_median
+                        .is_some_and(|v| v >= targets.min_median_ratio),
+                ),
+            ]);
+        }
+        lines
+    }
+
+    /// Whether the gate fails: a gated mode has no column, or one of its columns (single-frame
+    /// or fused) answered no frame or returned an unsafe site.
+    pub fn gate_failed(&self, gate: &[Mode]) -> bool {
+        gate.iter().any(|&g| {
+            let mut columns = self.modes.iter().filter(|m| m.mode == g).peekable();
+            columns.peek().is_none() || columns.any(|m| m.unsafe_sites() > 0 || m.frames == 0)
+        })
+    }
+
+    /// The titled tables of the report, shared by the text and the Markdown.
+    fn tables(&self, markdown: bool) -> Vec<(&'static str, Rows)> {
+        let mut t = vec![
+            (
+                if markdown { "Quality" } else { "quality" },
+                self.main_rows(),
             ),
             (
-                format!(
-                    "{}: mean polygon IoU (target roofs) = {} (target >= {})",
-                    mode.name(),
-                    opt(iou, 3),
-                    targets.min_mean_iou
-                ),
-                iou.is_some_and(|v| v >= targets.min_mean_iou),
+                if markdown {
+                    "Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)"
+                } else {
+                    "obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)"
+                },
+                self.class_rows(),
             ),
             (
-                format!(
-                    "{}: median radius ratio (target roofs) = {} (target >= {})",
-                    mode.name(),
-                    opt(m.ratio_median, 3),
-                    targets.min_median_ratio
-                ),
-                m.ratio_median
-                    .is_some_and(|v| v >= targets.min_median_ratio),
+                if markdown {
+                    "Hard cases (frames, unsafe sites, mean IoU, median radius ratio)"
+                } else {
+                    "hard cases (frames, unsafe sites, mean IoU, median radius ratio)"
+                },
+                self.tag_rows(),
             ),
-        ]
+        ];
+        if self.modes.iter().any(|m| !m.breakdown.is_empty()) {
+            t.push((
+                if markdown {
+                    "Approach breakdown (answers, unsafe sites, mean target IoU, median target radius ratio)"
+                } else {
+                    "approach breakdown (answers, unsafe sites, mean target IoU, median target radius ratio)"
+                },
+                self.breakdown_rows(),
+            ));
+        }
+        t.push((
+            if markdown {
+                "Server time per step, ms: mean [95 % CI]"
+            } else {
+                "server time per step, ms: mean [95% CI]"
+            },
+            self.step_rows(),
+        ));
+        t
     }
 
     /// The report as aligned plain-text tables.
     pub fn to_text(&self) -> String {
-        let header: Vec<String> = self
-            .modes
-            .iter()
-            .map(|m| m.mode.name().to_string())
-            .collect();
+        let header: Vec<String> = self.modes.iter().map(ModeSummary::label).collect();
         let mut s = String::new();
         let _ = writeln!(
             s,
@@ -601,18 +778,7 @@ impl Summary {
             self.scenarios,
             header.join(", ")
         );
-        for (title, rows) in [
-            ("quality", self.main_rows()),
-            (
-                "obstacles by class (hit by a safe circle / scored; footprint inside landing polygons)",
-                self.class_rows(),
-            ),
-            (
-                "hard cases (frames, unsafe sites, mean IoU, median radius ratio)",
-                self.tag_rows(),
-            ),
-            ("server time per step, ms: mean [95% CI]", self.step_rows()),
-        ] {
+        for (title, rows) in self.tables(false) {
             let _ = writeln!(s, "\n{title}");
             text_table(&mut s, &header, &rows);
         }
@@ -624,7 +790,7 @@ impl Summary {
         let header: Vec<String> = self
             .modes
             .iter()
-            .map(|m| format!("`{}`", m.mode.name()))
+            .map(|m| format!("`{}`", m.label()))
             .collect();
         let mut s = String::new();
         let _ = writeln!(
@@ -638,18 +804,7 @@ impl Summary {
                 let _ = writeln!(s, "- {} {line}", if ok { "PASS" } else { "FAIL" });
             }
         }
-        for (title, rows) in [
-            ("Quality", self.main_rows()),
-            (
-                "Obstacles by class (hit by a safe circle / scored; share of the footprint inside landing polygons)",
-                self.class_rows(),
-            ),
-            (
-                "Hard cases (frames, unsafe sites, mean IoU, median radius ratio)",
-                self.tag_rows(),
-            ),
-            ("Server time per step, ms: mean [95 % CI]", self.step_rows()),
-        ] {
+        for (title, rows) in self.tables(true) {
             let _ = writeln!(s, "\n#### {title}\n");
             md_table(&mut s, &header, &rows);
         }
@@ -660,15 +815,18 @@ impl Summary {
             );
             // At most 60 per mode, so that a noisy mode does not hide the others.
             let mut left_out = 0;
-            for mode in self.modes.iter().map(|m| m.mode) {
-                let of_mode: Vec<&UnsafeSite> =
-                    self.unsafe_list.iter().filter(|u| u.mode == mode).collect();
+            for (mode, fused) in self.modes.iter().map(|m| (m.mode, m.fused)) {
+                let of_mode: Vec<&UnsafeSite> = self
+                    .unsafe_list
+                    .iter()
+                    .filter(|u| u.mode == mode && u.fused == fused)
+                    .collect();
                 left_out += of_mode.len().saturating_sub(60);
                 for u in of_mode.into_iter().take(60) {
                     let _ = writeln!(
                         s,
                         "| {} | {} | {} | {:.2} | {} | {} |",
-                        u.mode.name(),
+                        column_name(u.mode, u.fused),
                         u.frame,
                         u.rank,
                         u.radius_m,
@@ -690,7 +848,7 @@ impl Summary {
                 let _ = writeln!(
                     s,
                     "| {} | {} | {} |",
-                    f.mode.name(),
+                    column_name(f.mode, f.fused),
                     f.frame,
                     f.error.replace('|', "/")
                 );
@@ -708,7 +866,8 @@ impl Summary {
         dir: &Path,
         records: &[FrameRecord],
     ) -> Result<Vec<(&'static str, String)>, EvalError> {
-        let names: Vec<&str> = self.modes.iter().map(|m| m.mode.name()).collect();
+        let labels: Vec<String> = self.modes.iter().map(ModeSummary::label).collect();
+        let names: Vec<&str> = labels.iter().map(String::as_str).collect();
         let groups: Vec<BarGroup> = STEPS
             .iter()
             .enumerate()
@@ -748,12 +907,13 @@ impl Summary {
         let per_mode = |f: &dyn Fn(&FrameRecord) -> Vec<f64>| -> Vec<(&str, Vec<f64>)> {
             self.modes
                 .iter()
-                .map(|m| {
+                .zip(&names)
+                .map(|(m, name)| {
                     (
-                        m.mode.name(),
+                        *name,
                         records
                             .iter()
-                            .filter(|r| r.mode == m.mode)
+                            .filter(|r| r.mode == m.mode && r.fused == m.fused)
                             .flat_map(f)
                             .collect(),
                     )
@@ -894,6 +1054,9 @@ mod tests {
         FrameRecord {
             mode,
             frame: frame.into(),
+            at: ApproachFrame::default(),
+            fused: false,
+            fusion: None,
             tags: vec![],
             step_ms: vec![Some(1.0); STEPS.len()],
             round_trip_ms: 5.0,
@@ -964,5 +1127,82 @@ mod tests {
         let md = s.to_markdown(&Targets::default(), &[Mode::Model], &[]);
         assert!(md.contains("- PASS model: unsafe sites = 0"), "{md}");
         assert!(md.contains("into a tarp"), "{md}");
+    }
+
+    #[test]
+    fn fused_answers_get_their_own_columns_breakdown_and_gate() {
+        let tarp = Verdict::Obstacle {
+            class: 13,
+            intrusion_m: 1.0,
+            seen: true,
+        };
+        let single = vec![
+            record(Mode::Model, "a#1", Verdict::Safe, 0.95, 0.92),
+            record(Mode::Model, "a#2", Verdict::Safe, 0.97, 0.95),
+        ];
+        // Without fused answers: one column per mode and no breakdown, as before streams.
+        let s = summarize(&single, &[], &[Mode::Model]);
+        assert_eq!(s.modes.len(), 1);
+        assert!(s.modes[0].breakdown.is_empty());
+        assert!(!s.gate_failed(&[Mode::Model]));
+        assert!(!s.to_text().contains("breakdown"));
+        let json = serde_json::to_value(&s).unwrap();
+        assert!(json["modes"][0].get("fused").is_none(), "{json}");
+        // The fused stream of the same approach: the second answer puts a circle on the tarp.
+        let mut records = single.clone();
+        for (k, (verdict, iou)) in [(Verdict::Safe, 0.9), (tarp, 0.99)].into_iter().enumerate() {
+            let mut r = record(Mode::Model, &format!("a#{}", k + 1), verdict, iou, 1.0);
+            r.fused = true;
+            r.at = ApproachFrame {
+                approach: "a".into(),
+                index: k,
+                approach_frames: 2,
+                time_s: Some(1.5 * k as f64),
+                camera_above_roof_m: Some(40.0 - 30.0 * k as f64),
+            };
+            records.push(r);
+        }
+        for r in records.iter_mut().take(2) {
+            r.at.approach_frames = 2;
+        }
+        records[1].at.index = 1;
+        let s = summarize(&records, &[], &[Mode::Model]);
+        let labels: Vec<String> = s.modes.iter().map(ModeSummary::label).collect();
+        assert_eq!(labels, ["model", "model fused"]);
+        assert_eq!(
+            (s.modes[0].unsafe_sites(), s.modes[1].unsafe_sites()),
+            (0, 1)
+        );
+        assert_eq!(s.scenarios, 2);
+        let fused = &s.modes[1].breakdown;
+        let row = |label: &str| fused.iter().find(|t| t.tag == label).unwrap();
+        assert_eq!(row("all answers").frames, 2);
+        let last = row("last quarter of each approach");
+        assert_eq!((last.frames, last.unsafe_sites), (1, 1));
+        assert_eq!(last.mean_iou, Some(0.99));
+        assert_eq!(row("after the first second").frames, 1);
+        assert_eq!(row("altitude 40-30 m").unsafe_sites, 0);
+        assert_eq!(row("altitude 10-0 m").unsafe_sites, 1);
+        // The single-frame column gets the breakdown too, for the side-by-side.
+        assert_eq!(s.modes[0].breakdown[1].frames, 1);
+        // The gate fails on the fused column alone.
+        assert!(s.gate_failed(&[Mode::Model]));
+        assert!(
+            s.gate_failed(&[Mode::Geometry]),
+            "a gated mode without a column fails"
+        );
+        let lines = s.target_lines(Mode::Model, &Targets::default());
+        assert!(
+            lines
+                .iter()
+                .any(|(l, ok)| l.starts_with("model fused: unsafe sites = 1") && !ok)
+        );
+        let text = s.to_text();
+        assert!(
+            text.contains("approach breakdown") && text.contains("model fused"),
+            "{text}"
+        );
+        let md = s.to_markdown(&Targets::default(), &[Mode::Model], &[]);
+        assert!(md.contains("| model fused | a#2 |"), "{md}");
     }
 }

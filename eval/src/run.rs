@@ -1,17 +1,21 @@
 //! Running the evaluation: every scenario frame through the real service in every mode, each
-//! answer scored against the ground truth.
+//! answer scored against the ground truth; with [`EvalConfig::stream`], also every approach as
+//! one fused stream per mode.
 
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use landing_proto::v1::{
-    CameraImage, Frame, FrameResult, LandingSite, PipelineOptions, StageTimings,
+    CameraImage, Frame, FrameResult, FusionOptions, LandingSite, OverflowPolicy, PipelineOptions,
+    StageTimings,
 };
 
+use crate::approach::{ApproachFrame, fused_roofs};
 use crate::geom::{P2, Polygon2, convex_hull};
 use crate::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
-use crate::report::{FrameFailure, FrameRecord, Mode, STEPS};
-use landing_client::LandingClient;
+use crate::report::{FrameFailure, FrameRecord, FusionInfo, Mode, STEPS, column_name};
+use landing_client::{ClientError, FrameOutcome, LandingClient, StreamConfig};
 
 use crate::EvalError;
 
@@ -20,6 +24,8 @@ use crate::EvalError;
 pub struct Scenario {
     /// Recording file and frame sequence, e.g. `w3.mcap#12`.
     pub name: String,
+    /// Where the frame stands in its approach (its recording).
+    pub at: ApproachFrame,
     /// Hard-case tags (`tarp`, `water_tower`, ...), from the ground truth.
     pub tags: Vec<String>,
     pub frame: Frame,
@@ -45,6 +51,11 @@ pub struct EvalConfig {
     pub overlay_dir: Option<PathBuf>,
     /// Draw every frame, not only those with an unsafe site.
     pub overlay_all: bool,
+    /// Also send each approach as one fused stream per mode, with these fusion options
+    /// (`landing eval --stream`); `None`: single frames only.
+    pub stream: Option<FusionOptions>,
+    /// Frames of a fused stream sent and unanswered at once.
+    pub stream_max_in_flight: usize,
 }
 
 impl Default for EvalConfig {
@@ -56,6 +67,8 @@ impl Default for EvalConfig {
             roof_band_m: 0.2,
             overlay_dir: None,
             overlay_all: false,
+            stream: None,
+            stream_max_in_flight: 4,
         }
     }
 }
@@ -141,9 +154,42 @@ pub fn step_times_ms(t: Option<&StageTimings>) -> Vec<Option<f64>> {
     ]
 }
 
-/// Scores one answer.
+/// Scores one single-frame answer against the frame's truth.
 pub fn record_of(
     scenario: &Scenario,
+    mode: Mode,
+    result: &FrameResult,
+    round_trip: Duration,
+    params: &MetricsParams,
+) -> FrameRecord {
+    score(
+        scenario,
+        &scenario.roofs,
+        false,
+        mode,
+        result,
+        round_trip,
+        params,
+    )
+}
+
+/// Scores one answer of a fused stream against `roofs`, the truth of the approach's scans so far
+/// ([`fused_roofs`]).
+pub fn fused_record_of(
+    scenario: &Scenario,
+    roofs: &[RoofTruth],
+    mode: Mode,
+    result: &FrameResult,
+    round_trip: Duration,
+    params: &MetricsParams,
+) -> FrameRecord {
+    score(scenario, roofs, true, mode, result, round_trip, params)
+}
+
+fn score(
+    scenario: &Scenario,
+    roofs: &[RoofTruth],
+    fused: bool,
     mode: Mode,
     result: &FrameResult,
     round_trip: Duration,
@@ -153,16 +199,21 @@ pub fn record_of(
     FrameRecord {
         mode,
         frame: scenario.name.clone(),
+        at: scenario.at.clone(),
+        fused,
+        fusion: result.fusion.as_ref().map(FusionInfo::from),
         tags: scenario.tags.clone(),
         step_ms: step_times_ms(result.timings.as_ref()),
         round_trip_ms: round_trip.as_secs_f64() * 1e3,
-        eval: evaluate_frame(&sites, &scenario.roofs, params),
+        eval: evaluate_frame(&sites, roofs, params),
     }
 }
 
 /// Sends every scenario in every mode to the service (one unary call at a time, so that the
-/// timings are not inflated by queueing) and scores the answers. A frame the server refuses is a
-/// [`FrameFailure`], not an error of the run; an unreachable server is.
+/// timings are not inflated by queueing) and scores the answers; then, with
+/// [`EvalConfig::stream`], every approach again as one fused stream per mode ([`run_streams`]).
+/// A frame the server refuses is a [`FrameFailure`], not an error of the run; an unreachable
+/// server is. `progress` gets (frames done, frames to do) over both passes.
 pub async fn run(
     client: &LandingClient,
     scenarios: &[Scenario],
@@ -183,6 +234,8 @@ pub async fn run(
         tolerance_m: precision,
         ..config.metrics.clone()
     };
+    let passes = if config.stream.is_some() { 2 } else { 1 };
+    let total = scenarios.len() * passes;
     let mut records = Vec::new();
     let mut failures = Vec::new();
     for (i, scenario) in scenarios.iter().enumerate() {
@@ -202,7 +255,8 @@ pub async fn run(
                     if let Some(dir) = &config.overlay_dir {
                         let any_unsafe = record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
                         if any_unsafe || config.overlay_all {
-                            write_overlay(dir, scenario, mode, &result, &record)?;
+                            let name = format!("{} {}", scenario.name, mode.name());
+                            write_overlay(dir, &name, &scenario.roofs, &result, &record)?;
                         }
                     }
                     records.push(record);
@@ -211,22 +265,220 @@ pub async fn run(
                     failures.push(FrameFailure {
                         mode,
                         frame: scenario.name.clone(),
+                        fused: false,
                         error: e.to_string(),
                     })
                 }
                 Err(e) => return Err(e.into()),
             }
         }
-        progress(i + 1, scenarios.len());
+        progress(i + 1, total);
+    }
+    if let Some(fusion) = &config.stream {
+        let done = scenarios.len();
+        let (r, f) = run_streams(client, scenarios, config, fusion, &params, |k| {
+            progress(done + k, total)
+        })
+        .await?;
+        records.extend(r);
+        failures.extend(f);
     }
     Ok((records, failures))
 }
 
-/// Draws one answer over the truth into `dir` as `<recording>-<sequence>-<mode>.png`.
+/// The approaches of `scenarios`: the indices of each recording's frames, in approach order
+/// (by [`ApproachFrame::index`]), the approaches in the order their first frame appears.
+pub fn approaches(scenarios: &[Scenario]) -> Vec<Vec<usize>> {
+    let mut out: Vec<(&str, Vec<usize>)> = Vec::new();
+    for (i, s) in scenarios.iter().enumerate() {
+        match out.iter_mut().find(|(name, _)| *name == s.at.approach) {
+            Some((_, v)) => v.push(i),
+            None => out.push((&s.at.approach, vec![i])),
+        }
+    }
+    out.into_iter()
+        .map(|(_, mut v)| {
+            v.sort_by_key(|&i| scenarios[i].at.index);
+            v
+        })
+        .collect()
+}
+
+/// Sends every approach ([`approaches`]) in every mode as one fused stream (`OVERFLOW_POLICY_BLOCK`,
+/// at most [`EvalConfig::stream_max_in_flight`] frames in flight, the mode's options on every
+/// frame, `fusion` on the first) and scores each answer against the truth of the approach's
+/// scans so far ([`fused_roofs`]). Round trips include the wait behind the frames in flight.
+/// Every frame sent gets one record or one [`FrameFailure`]: a refused frame, a broken stream
+/// (its unanswered frames, and those not sent) are failures; an unreachable server is an error,
+/// and so is a result without a fusion summary (the server does not fuse: the fused columns
+/// would silently be single-frame ones). `progress` gets the frames done so far.
+pub async fn run_streams(
+    client: &LandingClient,
+    scenarios: &[Scenario],
+    config: &EvalConfig,
+    fusion: &FusionOptions,
+    params: &MetricsParams,
+    mut progress: impl FnMut(usize),
+) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), EvalError> {
+    let mut records = Vec::new();
+    let mut failures = Vec::new();
+    let mut done = 0;
+    for approach in approaches(scenarios) {
+        let frames: Vec<&Scenario> = approach.iter().map(|&i| &scenarios[i]).collect();
+        let roofs = fused_roofs(
+            &frames
+                .iter()
+                .map(|s| s.roofs.as_slice())
+                .collect::<Vec<_>>(),
+        );
+        for &mode in &config.modes {
+            let (r, f) =
+                stream_approach(client, &frames, &roofs, mode, config, fusion, params).await?;
+            records.extend(r);
+            failures.extend(f);
+        }
+        done += frames.len();
+        progress(done);
+    }
+    Ok((records, failures))
+}
+
+/// One approach through one fused stream in one mode.
+async fn stream_approach(
+    client: &LandingClient,
+    frames: &[&Scenario],
+    roofs: &[Vec<RoofTruth>],
+    mode: Mode,
+    config: &EvalConfig,
+    fusion: &FusionOptions,
+    params: &MetricsParams,
+) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), EvalError> {
+    let window = config.stream_max_in_flight.max(1);
+    let (sender, mut results) = client.open_stream(StreamConfig {
+        overflow_policy: OverflowPolicy::Block,
+        options: Some(PipelineOptions {
+            segmentation_mode: mode.segmentation_mode() as i32,
+            ..config.options.clone()
+        }),
+        max_in_flight: window,
+        fusion: Some(*fusion),
+    });
+    let by_sequence: HashMap<u64, usize> = frames
+        .iter()
+        .enumerate()
+        .map(|(k, s)| (s.frame.sequence, k))
+        .collect();
+    let mut answered = vec![false; frames.len()];
+    let mut records = Vec::new();
+    let mut failures = Vec::new();
+    let failure = |k: usize, error: String| FrameFailure {
+        mode,
+        frame: frames[k].name.clone(),
+        fused: true,
+        error,
+    };
+    // Sending and receiving alternate on this task: a frame is only sent while the window has
+    // room, so a send never waits on an answer that nobody is reading. Once every frame is sent,
+    // dropping the sender ends the request stream: the server answers what is in flight and
+    // closes, which ends `results`.
+    let mut sender = Some(sender);
+    let mut next = 0;
+    loop {
+        if let Some(tx) = sender.as_mut() {
+            if next < frames.len() && tx.in_flight() < window {
+                let mut frame = frames[next].frame.clone();
+                if mode == Mode::Truth {
+                    frame.class_image.clone_from(&frames[next].labels);
+                }
+                match tx.send(frame).await {
+                    Ok(()) => next += 1,
+                    // The stream is over; what it left unanswered comes out of `results`.
+                    Err(_) => sender = None,
+                }
+                continue;
+            }
+            if next == frames.len() {
+                sender = None;
+            }
+        }
+        let Some(item) = results.next().await else {
+            break;
+        };
+        match item {
+            Ok(item) => {
+                let Some(&k) = by_sequence.get(&item.sequence) else {
+                    continue;
+                };
+                answered[k] = true;
+                match item.outcome {
+                    FrameOutcome::Result(result) => {
+                        if result.fusion.is_none() {
+                            return Err(EvalError::Invalid {
+                                field: "FrameResult.fusion",
+                                reason: format!(
+                                    "frame {} of a fused stream was answered without a fusion summary: the server does not fuse",
+                                    frames[k].name
+                                ),
+                            });
+                        }
+                        let record = fused_record_of(
+                            frames[k],
+                            &roofs[k],
+                            mode,
+                            &result,
+                            item.latency,
+                            params,
+                        );
+                        if let Some(dir) = &config.overlay_dir {
+                            let any_unsafe =
+                                record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
+                            if any_unsafe || config.overlay_all {
+                                let name =
+                                    format!("{} {}", frames[k].name, column_name(mode, true));
+                                write_overlay(dir, &name, &roofs[k], &result, &record)?;
+                            }
+                        }
+                        records.push(record);
+                    }
+                    FrameOutcome::Error(e) => failures.push(failure(k, e.to_string())),
+                    FrameOutcome::Skipped { superseded_by } => failures.push(failure(
+                        k,
+                        format!("skipped, superseded by frame {superseded_by}"),
+                    )),
+                }
+            }
+            Err(ClientError::StreamBroken { unanswered, status })
+                if status
+                    .as_ref()
+                    .is_none_or(|s| landing_client::code_label(s.code) != "unavailable") =>
+            {
+                let why = status.map_or_else(
+                    || "the stream ended without an answer".to_string(),
+                    |s| format!("the stream broke: {s}"),
+                );
+                for seq in unanswered {
+                    if let Some(&k) = by_sequence.get(&seq) {
+                        answered[k] = true;
+                        failures.push(failure(k, why.clone()));
+                    }
+                }
+                break;
+            }
+            Err(e) => return Err(e.into()),
+        }
+    }
+    for (k, _) in answered.iter().enumerate().filter(|(_, a)| !**a) {
+        failures.push(failure(k, "not answered: the stream closed first".into()));
+    }
+    Ok((records, failures))
+}
+
+/// Draws one answer over `roofs` into `dir`, titled `title` (`<recording>#<sequence> <column>`),
+/// as `<recording>-<sequence>-<column>.png`.
 fn write_overlay(
     dir: &std::path::Path,
-    scenario: &Scenario,
-    mode: Mode,
+    title: &str,
+    roofs: &[RoofTruth],
     result: &FrameResult,
     record: &FrameRecord,
 ) -> Result<(), EvalError> {
@@ -235,16 +487,12 @@ fn write_overlay(
         source: e,
     })?;
     let sites: Vec<Site> = result.sites.iter().map(site_of).collect();
-    let title = format!("{} {}", scenario.name, mode.name());
-    if let Some(canvas) =
-        crate::overlay::draw_overlay(&title, &scenario.roofs, &sites, &record.eval.sites)
-    {
-        let stem: String = scenario
-            .name
+    if let Some(canvas) = crate::overlay::draw_overlay(title, roofs, &sites, &record.eval.sites) {
+        let stem: String = title
             .chars()
             .map(|c| if c.is_ascii_alphanumeric() { c } else { '-' })
             .collect();
-        canvas.save(&dir.join(format!("{stem}-{}.png", mode.name())))?;
+        canvas.save(&dir.join(format!("{stem}.png")))?;
     }
     Ok(())
 }
@@ -310,6 +558,7 @@ mod tests {
         };
         let mut sc = Scenario {
             name: "t#1".into(),
+            at: ApproachFrame::default(),
             tags: vec![],
             frame,
             labels: None,
@@ -318,6 +567,24 @@ mod tests {
         fill_scanned_regions(&mut sc, 0.2).unwrap();
         let s = sc.roofs[0].scanned.as_ref().unwrap();
         assert!((s.area() - 16.0).abs() < 1e-6, "{s:?}");
+    }
+
+    #[test]
+    fn approaches_group_by_recording_in_sequence_order() {
+        let sc = |approach: &str, index: usize| Scenario {
+            name: format!("{approach}#{index}"),
+            at: ApproachFrame {
+                approach: approach.into(),
+                index,
+                ..Default::default()
+            },
+            tags: vec![],
+            frame: Frame::default(),
+            labels: None,
+            roofs: vec![],
+        };
+        let scenarios = [sc("b", 1), sc("a", 0), sc("b", 0), sc("a", 1), sc("b", 2)];
+        assert_eq!(approaches(&scenarios), [vec![2, 0, 4], vec![1, 3]]);
     }
 
     #[test]

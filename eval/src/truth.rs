@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use landing_proto::v1::{CameraImage, Frame, GroundTruth, LinearRing, SemanticClass};
 
 use crate::EvalError;
+use crate::approach::ApproachFrame;
 use crate::geom::{P2, Polygon2, bounds_of, prism_shadow};
 use crate::metrics::{Obstacle, RoofTruth};
 use crate::run::Scenario;
@@ -17,6 +18,8 @@ use crate::run::Scenario;
 pub const PARAPET_THICKNESS_M: (f64, f64) = (0.2, 0.45);
 
 /// Reads every file and pairs frames with their ground truth; frames without truth are skipped.
+/// Each file is one approach: its frames, in the order read, get their place in it
+/// ([`place_in_approach`]).
 pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, EvalError> {
     let mut out = Vec::new();
     for f in files {
@@ -25,11 +28,15 @@ pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, EvalError> {
             source,
         })?;
         let name = short_name(f);
-        for r in recorded {
-            if let Some(truth) = r.truth {
-                out.push(scenario_of(&name, r.frame, &truth, r.labels));
-            }
-        }
+        let mut of_file: Vec<Scenario> = recorded
+            .into_iter()
+            .filter_map(|r| {
+                r.truth
+                    .map(|truth| scenario_of(&name, r.frame, &truth, r.labels))
+            })
+            .collect();
+        place_in_approach(&mut of_file);
+        out.extend(of_file);
     }
     if out.is_empty() {
         return Err(EvalError::Invalid {
@@ -38,6 +45,30 @@ pub fn load_scenarios(files: &[PathBuf]) -> Result<Vec<Scenario>, EvalError> {
         });
     }
     Ok(out)
+}
+
+/// Sets the approach index, length and time since the start of the frames of one approach
+/// (one recording): the index is the rank by sequence (the recording's time order), the time is
+/// the frame's timestamp minus the earliest one. The frames stay in the order given.
+pub fn place_in_approach(frames: &mut [Scenario]) {
+    let mut order: Vec<usize> = (0..frames.len()).collect();
+    order.sort_by_key(|&i| frames[i].frame.sequence);
+    let ns = |s: &Scenario| {
+        s.frame
+            .timestamp
+            .map(|t| i128::from(t.seconds) * 1_000_000_000 + i128::from(t.nanos))
+    };
+    let start = frames.iter().filter_map(ns).min();
+    let n = frames.len();
+    for (rank, &i) in order.iter().enumerate() {
+        let time_s = ns(&frames[i])
+            .zip(start)
+            .map(|(t, t0)| (t - t0) as f64 * 1e-9);
+        let at = &mut frames[i].at;
+        at.index = rank;
+        at.approach_frames = n;
+        at.time_s = time_s;
+    }
 }
 
 /// The MCAP files named, with folders expanded to their `*.mcap` files in name order.
@@ -147,8 +178,20 @@ pub fn scenario_of(
         });
     }
     roofs.extend(raised);
+    let camera_above_roof_m = truth
+        .camera_pose
+        .as_ref()
+        .and_then(|p| p.position.as_ref())
+        .zip(truth.roofs.first())
+        .map(|(p, target)| p.z - target.height_m);
     Scenario {
         name: format!("{file}#{}", frame.sequence),
+        // Index, length and time are the approach's: `place_in_approach`.
+        at: ApproachFrame {
+            approach: file.to_string(),
+            camera_above_roof_m,
+            ..Default::default()
+        },
         tags: tags_of(truth),
         frame,
         labels,

@@ -125,6 +125,9 @@ fn the_report_folder_has_tables_json_and_charts() {
             Some(FrameRecord {
                 mode: Mode::Truth,
                 frame: s.name.clone(),
+                at: s.at.clone(),
+                fused: false,
+                fusion: None,
                 tags: s.tags.clone(),
                 step_ms: vec![Some(1.0); eval::report::STEPS.len()],
                 round_trip_ms: 2.0,

@@ -236,6 +236,7 @@ fn main() {
                 }),
                 options: Some(options(mode)),
                 overflow_policy: v1::OverflowPolicy::Block as i32,
+                ..Default::default()
             })
             .collect();
         let in_process_batch = || {

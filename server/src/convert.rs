@@ -824,6 +824,7 @@ impl From<&FrameOutput> for v1::FrameResult {
             point_count: count(o.point_count),
             triangle_count: count(o.triangle_count),
             timings: Some(v1::StageTimings::from(&o.timings)),
+            fusion: None,
         }
     }
 }

@@ -127,6 +127,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         tokio::spawn(async move {
             let dispatcher = reader_dispatcher;
             let mut latest_policy = None;
+            let mut fusion_policy = None;
             let mut index = 0u64;
             loop {
                 if *draining.borrow() {
@@ -155,7 +156,18 @@ impl v1::landing_service_server::LandingService for LandingService {
                 let sequence = request.frame.as_ref().map_or(0, |f| f.sequence);
                 index += 1;
                 latest_tx.send_replace((index, sequence));
-                let parts = convert::stream_parts(&request, &dispatcher.pipeline.defaults);
+                let asks_fusion = *fusion_policy
+                    .get_or_insert(request.fusion.as_ref().is_some_and(|f| f.enabled));
+                let parts = if asks_fusion {
+                    // FIXME(issue 16): the fusion map exists (`landing-fusion`); the server does
+                    // not use it yet, so a stream that asks for it is told, frame by frame.
+                    Err(crate::Error::invalid(
+                        "fusion.enabled",
+                        "approach fusion is not served by this server version",
+                    ))
+                } else {
+                    convert::stream_parts(&request, &dispatcher.pipeline.defaults)
+                };
                 drop(request);
                 let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =
                     if latest {
@@ -230,6 +242,8 @@ impl v1::landing_service_server::LandingService for LandingService {
             classes,
             default_options: Some(convert::default_options(&pipeline.defaults)),
             max_request_bytes: self.max_request_bytes,
+            // Approach fusion is not served yet: streams that ask for it get INVALID_ARGUMENT.
+            default_fusion: None,
         }))
     }
 }

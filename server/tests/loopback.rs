@@ -73,6 +73,7 @@ fn stream_request(frame: v1::Frame, policy: v1::OverflowPolicy) -> v1::StreamLan
         frame: Some(frame),
         options: None,
         overflow_policy: policy as i32,
+        ..Default::default()
     }
 }
 
@@ -584,6 +585,7 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
             frame: Some(f.clone()),
             options: Some(options.clone()),
             overflow_policy: v1::OverflowPolicy::Block as i32,
+            ..Default::default()
         })
         .collect();
     let responses = stream_all(&channel, requests).await;

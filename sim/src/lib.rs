@@ -9,9 +9,11 @@
 //! hierarchy over analytic boxes, cylinders, cones and spheres ([`scene`]). [`flight`] makes the
 //! poses (T_world_sensor, camera in the optical convention), [`truth`] the per-frame ground truth
 //! (roofs in view, obstacle footprints, true best landing point from
-//! `landing_geometry::polylabel::polylabel`), [`recording`] the MCAP recordings of flights (the
-//! format, its writer and its reader are `landing_recording`'s), and [`dataset`] the image/label
-//! datasets (its module docs give the manifest format).
+//! `landing_geometry::polylabel::polylabel`), [`noise`] the error of the poses a drone believes
+//! (RTK GNSS + INS: [`noise::PoseNoise`]; frames carry it, the ground truth does not),
+//! [`recording`] the MCAP recordings of flights (the format, its writer and its reader are
+//! `landing_recording`'s), and [`dataset`] the image/label datasets (its module docs give the
+//! manifest format).
 //!
 //! Classes are [`landing_geometry::SemanticClass`] ids everywhere.
 //!
@@ -22,7 +24,14 @@
 //! landing-sim record  --seed 1 --frames 15 --out F.mcap [--width 320 --height 240]
 //! landing-sim preview --seed 1 --out F.png
 //! landing-sim ply     --seed 1 --out samples/roof.ply
+//! landing-sim scenarios --seed 2026 --out DIR            # 4 frames per approach, 40 m to 10 m
+//! landing-sim scenarios --seed 9100 --rate-hz 10 --duration-s 4 --pose-noise realistic --out DIR
 //! ```
+//!
+//! `scenarios` writes the `landing eval` set: one approach per building, `--frames` frames
+//! (default 4) at 10 Hz, or with `--rate-hz R` round(D·R)+1 frames at R Hz over the same
+//! descent lasting `--duration-s D` (default 4 s); `--pose-noise realistic` makes the frames
+//! carry an RTK-GNSS/INS pose error ([`noise::PoseNoise::REALISTIC`]).
 //!
 //! Reading a recording from another crate:
 //!
@@ -57,6 +66,7 @@ pub mod dataset;
 pub mod flight;
 pub mod lidar;
 pub mod math;
+pub mod noise;
 pub mod recording;
 pub mod scene;
 pub mod truth;

@@ -9,6 +9,7 @@ use landing_sim::camera::{CameraConfig, Intrinsics, render};
 use landing_sim::dataset::{DatasetConfig, Split, class_color, write_dataset};
 use landing_sim::flight::{FlightConfig, ViewConfig, lidar_pose, random_view, view_of};
 use landing_sim::lidar::{LidarConfig, scan};
+use landing_sim::noise::PoseNoise;
 use landing_sim::recording::{
     RecordConfig, busiest_roof, write_ply as write_recording_ply, write_recording,
 };
@@ -68,6 +69,94 @@ impl LidarArgs {
         config.validate().context("--lidar-points-per-second")?;
         Ok(config)
     }
+}
+
+/// The pose error the frames of a scenario carry.
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
+enum PoseNoiseArg {
+    /// The true poses.
+    None,
+    /// RTK-fixed GNSS with a dual-antenna MEMS INS: a per-approach bias (2 cm horizontal,
+    /// 3 cm vertical), a 1 cm/√s random walk, 0.03° roll/pitch and 0.1° yaw noise and a 0.1°
+    /// heading bias (EVALUATION.md, "Pose noise").
+    Realistic,
+}
+
+/// How an approach is sampled in time, and the pose error its frames carry.
+#[derive(clap::Args)]
+struct ApproachArgs {
+    /// Frames per approach (from 40 m down to 10 m above the roof), timestamped at 10 Hz.
+    #[arg(long, default_value_t = 4)]
+    frames: u32,
+    /// Sensor rate, Hz: the same descent from 40 m to 10 m, lasting --duration-s, sampled at
+    /// this rate (round(duration × rate) + 1 frames, timestamps at this rate).
+    #[arg(long, conflicts_with = "frames")]
+    rate_hz: Option<f64>,
+    /// Duration of the descent with --rate-hz, seconds.
+    #[arg(long, default_value_t = 4.0, requires = "rate_hz")]
+    duration_s: f64,
+    /// Error of the poses the frames carry (the ground truth keeps the true poses).
+    #[arg(long, value_enum, default_value = "none")]
+    pose_noise: PoseNoiseArg,
+}
+
+impl ApproachArgs {
+    fn flight(&self) -> anyhow::Result<FlightConfig> {
+        let Some(rate_hz) = self.rate_hz else {
+            return Ok(FlightConfig {
+                frames: self.frames,
+                ..Default::default()
+            });
+        };
+        anyhow::ensure!(
+            rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= 1000.0,
+            "--rate-hz {rate_hz}: need 0 < rate <= 1000"
+        );
+        let d = self.duration_s;
+        anyhow::ensure!(
+            d.is_finite() && d > 0.0 && d <= 600.0,
+            "--duration-s {d}: need 0 < duration <= 600"
+        );
+        let frames = (d * rate_hz).round() + 1.0;
+        anyhow::ensure!(
+            frames <= 100_000.0,
+            "--duration-s {d} at --rate-hz {rate_hz} makes {frames} frames per approach (at most 100000)"
+        );
+        Ok(FlightConfig {
+            frames: frames as u32,
+            rate_hz,
+            ..Default::default()
+        })
+    }
+
+    fn pose_noise(&self) -> PoseNoise {
+        match self.pose_noise {
+            PoseNoiseArg::None => PoseNoise::NONE,
+            PoseNoiseArg::Realistic => PoseNoise::REALISTIC,
+        }
+    }
+}
+
+/// The recording of one scenario: building `building` of world `world_seed`.
+fn scenario_config(
+    world_seed: u64,
+    building: usize,
+    approach: &ApproachArgs,
+    width: u32,
+    height: u32,
+    lidar: LidarConfig,
+) -> anyhow::Result<RecordConfig> {
+    Ok(RecordConfig {
+        seed: world_seed,
+        flight: approach.flight()?,
+        width,
+        height,
+        lidar,
+        building: Some(building),
+        drone_id: format!("w{world_seed}-b{building}"),
+        pose_noise: approach.pose_noise(),
+        ..Default::default()
+    })
 }
 
 #[derive(Subcommand)]
@@ -145,6 +234,11 @@ enum Command {
     /// Write the `landing eval` scenario set: approach flights to many buildings of
     /// Manhattan-distribution worlds (seeds seed, seed+1, ...), one MCAP per building, buildings
     /// with a tarp or a water tower first.
+    ///
+    /// Each approach descends from 40 m to 10 m above the roof: --frames frames at 10 Hz (the
+    /// default, 4), or with --rate-hz R frames at R Hz over --duration-s seconds (default 4:
+    /// 41 frames at 10 Hz). --pose-noise realistic makes the frames carry an RTK GNSS + INS pose
+    /// error; the ground truth and the scans keep the true poses.
     Scenarios {
         #[arg(long, default_value_t = 2026)]
         seed: u64,
@@ -154,9 +248,8 @@ enum Command {
         /// Buildings per world.
         #[arg(long, default_value_t = 6)]
         buildings: usize,
-        /// Frames per approach (from 40 m down to 10 m above the roof).
-        #[arg(long, default_value_t = 4)]
-        frames: u32,
+        #[command(flatten)]
+        approach: ApproachArgs,
         #[arg(long)]
         out: PathBuf,
         #[arg(long, default_value_t = 320)]
@@ -308,13 +401,14 @@ fn main() -> anyhow::Result<()> {
             seed,
             worlds,
             buildings,
-            frames,
+            approach,
             out,
             width,
             height,
             lidar,
         } => {
             let lidar = lidar.config()?;
+            approach.flight()?;
             std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
             let start = Instant::now();
             let (mut files, mut total) = (0usize, 0usize);
@@ -337,19 +431,7 @@ fn main() -> anyhow::Result<()> {
                     )
                 });
                 for &b in order.iter().take(buildings) {
-                    let config = RecordConfig {
-                        seed: world_seed,
-                        flight: FlightConfig {
-                            frames,
-                            ..Default::default()
-                        },
-                        width,
-                        height,
-                        lidar,
-                        building: Some(b),
-                        drone_id: format!("w{world_seed}-b{b}"),
-                        ..Default::default()
-                    };
+                    let config = scenario_config(world_seed, b, &approach, width, height, lidar)?;
                     let path = out.join(format!("w{world_seed}-b{b:03}.mcap"));
                     total += write_recording(&config, &path)
                         .with_context(|| format!("writing {}", path.display()))?;
@@ -422,6 +504,171 @@ mod tests {
             Command::Scenarios { lidar, .. } => Ok(lidar),
             _ => unreachable!("parsed another subcommand"),
         }
+    }
+
+    fn approach(extra: &[&str]) -> Result<ApproachArgs, clap::Error> {
+        let args = ["landing-sim", "scenarios", "--out", "x"]
+            .iter()
+            .chain(extra);
+        match Cli::try_parse_from(args)?.command {
+            Command::Scenarios { approach, .. } => Ok(approach),
+            _ => unreachable!("parsed another subcommand"),
+        }
+    }
+
+    /// Frame `i` of the scenario of building `b` of world `world` as the CLI would write it.
+    fn scenario_frames(
+        extra: &[&str],
+        world: u64,
+        b: usize,
+        size: (u32, u32),
+    ) -> Vec<landing_proto::v1::Frame> {
+        let a = approach(extra).unwrap();
+        let config = scenario_config(world, b, &a, size.0, size.1, LidarConfig::default());
+        let config = config.unwrap();
+        let (w, frames) = landing_sim::recording::simulate(&config).unwrap();
+        frames
+            .iter()
+            .map(|f| {
+                landing_sim::recording::frame_messages(&w, f, &config)
+                    .unwrap()
+                    .0
+            })
+            .collect()
+    }
+
+    fn poses(f: &landing_proto::v1::Frame) -> [f64; 14] {
+        let p = |pose: &Option<landing_proto::v1::Pose>| {
+            let pose = pose.unwrap();
+            let (t, q) = (pose.position.unwrap(), pose.orientation.unwrap());
+            [t.x, t.y, t.z, q.x, q.y, q.z, q.w]
+        };
+        let (c, l) = (
+            p(&f.image.as_ref().unwrap().pose),
+            p(&f.point_cloud.as_ref().unwrap().pose),
+        );
+        std::array::from_fn(|i| if i < 7 { c[i] } else { l[i - 7] })
+    }
+
+    fn assert_close(got: [f64; 14], want: [f64; 14]) {
+        for (g, w) in got.iter().zip(want) {
+            assert!((g - w).abs() < 1e-12, "{got:?} != {want:?}");
+        }
+    }
+
+    /// Frames 0 and 3 of `scenarios --seed 2026` building 29, as written before `--rate-hz`
+    /// and `--pose-noise` existed (camera position, quaternion xyzw, then the LiDAR's).
+    const BEFORE_FIRST: [f64; 14] = [
+        69.93958004119037,
+        57.85696681808146,
+        58.0,
+        -0.4401189548472991,
+        0.8302514842766678,
+        -0.30218682723204104,
+        0.16019019910076762,
+        69.9712802459404,
+        57.835468975378305,
+        58.032139380484324,
+        0.12406795064904763,
+        0.4039967063955791,
+        -0.2660645787803211,
+        0.8663737327283878,
+    ];
+    const BEFORE_LAST: [f64; 14] = [
+        96.99417532994353,
+        39.509595294731064,
+        28.0,
+        -0.4679190294768078,
+        0.8826942454210036,
+        -0.03853926305499857,
+        0.02042978603179327,
+        97.03539953851794,
+        39.481638644025395,
+        28.004357787137383,
+        0.19833286946049528,
+        0.6458221129055098,
+        -0.21644234648370053,
+        0.7047911619923016,
+    ];
+
+    #[test]
+    fn without_rate_hz_the_scenarios_are_todays() {
+        let a = approach(&[]).unwrap();
+        assert_eq!(
+            a.flight().unwrap(),
+            FlightConfig {
+                frames: 4,
+                ..Default::default()
+            }
+        );
+        assert_eq!(a.pose_noise(), PoseNoise::NONE);
+        let frames = scenario_frames(&[], 2026, 29, (320, 240));
+        assert_eq!(frames.len(), 4);
+        assert_close(poses(&frames[0]), BEFORE_FIRST);
+        assert_close(poses(&frames[3]), BEFORE_LAST);
+        let ts = frames[3].timestamp.unwrap();
+        assert_eq!((ts.seconds, ts.nanos), (1_767_225_600, 300_000_000));
+        let points = frames[0].point_cloud.as_ref().unwrap().data.len();
+        assert_eq!(points, 1630 * 17);
+    }
+
+    #[test]
+    fn rate_hz_samples_the_same_descent_at_the_sensor_rate() {
+        let ten = approach(&["--rate-hz", "10"]).unwrap().flight().unwrap();
+        assert_eq!((ten.frames, ten.rate_hz), (41, 10.0));
+        let twenty = approach(&["--rate-hz", "20", "--duration-s", "2.5"]).unwrap();
+        let twenty = twenty.flight().unwrap();
+        assert_eq!((twenty.frames, twenty.rate_hz), (51, 20.0));
+        assert_eq!(
+            (ten.altitude_m, ten.pitch_deg),
+            (
+                FlightConfig::default().altitude_m,
+                FlightConfig::default().pitch_deg
+            )
+        );
+
+        // The first and last frames are today's, 4 s apart.
+        let frames = scenario_frames(&["--rate-hz", "10"], 2026, 29, (64, 48));
+        assert_eq!(frames.len(), 41);
+        assert_close(poses(&frames[0]), BEFORE_FIRST);
+        assert_close(poses(&frames[40]), BEFORE_LAST);
+        let ts = frames[40].timestamp.unwrap();
+        assert_eq!((ts.seconds, ts.nanos), (1_767_225_604, 0));
+        let ts = frames[1].timestamp.unwrap();
+        assert_eq!((ts.seconds, ts.nanos), (1_767_225_600, 100_000_000));
+
+        let both = approach(&["--frames", "4", "--rate-hz", "10"])
+            .err()
+            .unwrap();
+        assert_eq!(both.kind(), clap::error::ErrorKind::ArgumentConflict);
+        let alone = approach(&["--duration-s", "2"]).err().unwrap();
+        assert_eq!(
+            alone.kind(),
+            clap::error::ErrorKind::MissingRequiredArgument
+        );
+        for (flags, name) in [
+            (["--rate-hz", "0", "--duration-s", "4"], "--rate-hz"),
+            (
+                ["--rate-hz", "10", "--duration-s=-1", "--pose-noise=none"],
+                "--duration-s",
+            ),
+            (["--rate-hz", "1000", "--duration-s", "600"], "at most"),
+        ] {
+            let err = approach(&flags).unwrap().flight().unwrap_err().to_string();
+            assert!(err.contains(name), "{err}");
+        }
+    }
+
+    #[test]
+    fn pose_noise_flag_picks_the_model() {
+        let a = approach(&["--pose-noise", "realistic"]).unwrap();
+        assert_eq!(a.pose_noise(), PoseNoise::REALISTIC);
+        assert!(approach(&["--pose-noise", "wild"]).is_err());
+        // The frames carry the error; the first pose is off by centimetres, not metres.
+        let noisy = scenario_frames(&["--pose-noise", "realistic"], 2026, 29, (64, 48));
+        let (got, want) = (poses(&noisy[0]), BEFORE_FIRST);
+        let d = ((got[0] - want[0]).powi(2) + (got[1] - want[1]).powi(2)).sqrt();
+        assert!(d > 1e-4 && d < 0.2, "{d}");
     }
 
     #[test]

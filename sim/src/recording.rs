@@ -5,6 +5,11 @@
 //! the LiDAR frame, pose = T_world_lidar, fields x, y, z, intensity FLOAT32 and class UINT8,
 //! stride 17; PNG camera image, pose = T_world_camera, optical), its `landing.v1.GroundTruth`
 //! and its true label image. The same seed gives a byte-identical file.
+//!
+//! The poses a frame carries are the drone's belief: the true poses, or with
+//! [`RecordConfig::pose_noise`] the true poses moved by one rigid error of the drone body
+//! ([`crate::noise`]). The scan is always simulated from the true pose, and the ground truth
+//! (`GroundTruth.camera_pose`/`lidar_pose`, roofs, obstacles) keeps the true poses.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -19,6 +24,7 @@ use crate::camera::{CameraConfig, Intrinsics, Rendered, render};
 use crate::dataset::{encode_label_png, encode_rgb_png};
 use crate::flight::{FlightConfig, View, approach, lidar_pose};
 use crate::lidar::{LidarConfig, LidarPoint, scan};
+use crate::noise::{PoseNoise, body_errors};
 use crate::truth::{RoofTruth, TruthConfig, ground_truth};
 use crate::world::{World, WorldConfig};
 
@@ -42,6 +48,8 @@ pub struct RecordConfig {
     /// Roof to approach; `None` picks the one with the most assets.
     pub building: Option<usize>,
     pub drone_id: String,
+    /// Error of the poses the frames carry (default: none, the true poses).
+    pub pose_noise: PoseNoise,
 }
 
 impl Default for RecordConfig {
@@ -57,6 +65,7 @@ impl Default for RecordConfig {
             truth: TruthConfig::default(),
             building: None,
             drone_id: "sim-1".to_string(),
+            pose_noise: PoseNoise::NONE,
         }
     }
 }
@@ -65,8 +74,14 @@ impl Default for RecordConfig {
 #[derive(Debug, Clone)]
 pub struct SimFrame {
     pub sequence: u64,
+    /// The true view (`view.camera` is the true T_world_camera).
     pub view: View,
+    /// The true T_world_lidar, which the scan was taken from.
     pub lidar_pose: Isometry3<f64>,
+    /// T_world_camera as the drone believes it: what the frame carries.
+    pub carried_camera_pose: Isometry3<f64>,
+    /// T_world_lidar as the drone believes it: what the frame carries.
+    pub carried_lidar_pose: Isometry3<f64>,
     pub intrinsics: Intrinsics,
     pub image: Rendered,
     pub points: Vec<LidarPoint>,
@@ -82,6 +97,14 @@ pub fn busiest_roof(world: &World) -> usize {
 
 /// Simulates the frames of a flight (camera, LiDAR and ground truth), without encoding them.
 pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimError> {
+    config.pose_noise.validate()?;
+    if !(config.flight.rate_hz.is_finite() && config.flight.rate_hz > 0.0) {
+        return Err(SimError::invalid(
+            "flight.rate_hz",
+            config.flight.rate_hz,
+            "must be positive",
+        ));
+    }
     let world = World::generate(config.seed, &config.world)?;
     if world.buildings.is_empty() {
         return Err(SimError::invalid(
@@ -101,10 +124,30 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
     let intrinsics = Intrinsics::from_hfov(config.width, config.height, config.camera.hfov_deg)?;
     let mut rng = SmallRng::seed_from_u64(config.seed ^ 0x666c_6967_6874);
     let views = approach(&world, building, &config.flight, &mut rng);
+    // Its own stream per approach (buildings of one world share the world's seed), so the
+    // pose error changes none of the draws above.
+    let noise_seed = (config.seed ^ 0x706f_7365_6e6f_6973)
+        .wrapping_add((building as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    let errors = body_errors(
+        &config.pose_noise,
+        noise_seed,
+        views.len(),
+        config.flight.rate_hz,
+    );
     let mut frames = Vec::with_capacity(views.len());
-    for (i, view) in views.into_iter().enumerate() {
+    for (i, (view, error)) in views.into_iter().zip(errors).enumerate() {
         let frame_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(i as u64);
         let lp = lidar_pose(&view.camera);
+        // The drone body's origin is the camera's; the LiDAR is bolted 5 cm above it.
+        let (carried_camera_pose, carried_lidar_pose) = if config.pose_noise.is_none() {
+            (view.camera, lp)
+        } else {
+            let origin = view.camera.translation.vector;
+            (
+                error.apply(&origin, &view.camera),
+                error.apply(&origin, &lp),
+            )
+        };
         let image = render(
             &world,
             &intrinsics,
@@ -118,6 +161,8 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
             sequence: i as u64,
             view,
             lidar_pose: lp,
+            carried_camera_pose,
+            carried_lidar_pose,
             intrinsics,
             image,
             points,
@@ -222,15 +267,19 @@ fn calibration(i: &Intrinsics) -> v1::CameraCalibration {
     }
 }
 
-/// The three messages of a frame: Frame, GroundTruth and the label image.
+/// The three messages of a frame: Frame, GroundTruth and the label image. The frame and the
+/// label image (pixel-registered with the camera image) carry the believed poses, the ground
+/// truth the true ones.
 pub fn frame_messages(
     world: &World,
     f: &SimFrame,
     config: &RecordConfig,
 ) -> Result<(v1::Frame, v1::GroundTruth, v1::CameraImage), SimError> {
     let ts = timestamp(f.sequence, config.flight.rate_hz);
-    let cam_pose = pose_to_proto(&f.view.camera);
-    let lidar_pose = pose_to_proto(&f.lidar_pose);
+    let cam_pose = pose_to_proto(&f.carried_camera_pose);
+    let lidar_pose = pose_to_proto(&f.carried_lidar_pose);
+    let true_cam_pose = pose_to_proto(&f.view.camera);
+    let true_lidar_pose = pose_to_proto(&f.lidar_pose);
     let frame = v1::Frame {
         drone_id: config.drone_id.clone(),
         sequence: f.sequence,
@@ -311,8 +360,8 @@ pub fn frame_messages(
         world_seed: world.seed,
         target_building: f.view.building as u32,
         roofs,
-        camera_pose: Some(cam_pose),
-        lidar_pose: Some(lidar_pose),
+        camera_pose: Some(true_cam_pose),
+        lidar_pose: Some(true_lidar_pose),
     };
     Ok((frame, truth, labels))
 }

@@ -216,3 +216,55 @@ fn committed_sample_ply_has_world_points_with_classes() {
     let obstacles = bytes[end..].chunks_exact(13).filter(|p| p[12] >= 5).count();
     assert!(obstacles > 10, "{obstacles} obstacle points");
 }
+
+#[test]
+fn realistic_pose_noise_moves_only_the_carried_poses_of_one_rigid_body() {
+    use landing_sim::noise::PoseNoise;
+    let base = RecordConfig {
+        flight: FlightConfig {
+            frames: 11,
+            ..Default::default()
+        },
+        ..config(9100, 11)
+    };
+    let noisy = RecordConfig {
+        pose_noise: PoseNoise::REALISTIC,
+        ..base.clone()
+    };
+    let clean = landing_recording::read_bytes(&record(&base)).expect("read back");
+    let moved = landing_recording::read_bytes(&record(&noisy)).expect("read back");
+    assert_eq!(clean.len(), moved.len());
+    for (c, m) in clean.iter().zip(&moved) {
+        let (ct, mt) = (c.truth.as_ref().unwrap(), m.truth.as_ref().unwrap());
+        // The ground truth is the same, true poses included, and so are the scan and pixels.
+        assert_eq!(ct, mt);
+        let (cc, mc) = (
+            c.frame.point_cloud.as_ref().unwrap(),
+            m.frame.point_cloud.as_ref().unwrap(),
+        );
+        assert_eq!(cc.data, mc.data);
+        let (ci, mi) = (
+            c.frame.image.as_ref().unwrap(),
+            m.frame.image.as_ref().unwrap(),
+        );
+        assert_eq!(ci.image, mi.image);
+        // Without noise the frame carries the true poses.
+        assert_eq!(ci.pose, ct.camera_pose);
+        assert_eq!(cc.pose, ct.lidar_pose);
+
+        let true_cam = pose_from_proto(ct.camera_pose.as_ref());
+        let true_lidar = pose_from_proto(ct.lidar_pose.as_ref());
+        let cam = pose_from_proto(mi.pose.as_ref());
+        let lidar = pose_from_proto(mc.pose.as_ref());
+        let off = (cam.translation.vector - true_cam.translation.vector).norm();
+        assert!(off > 1e-5 && off < 0.25, "camera position off by {off} m");
+        let turned = cam.rotation.angle_to(&true_cam.rotation).to_degrees();
+        assert!(turned > 1e-5 && turned < 1.0, "camera turned by {turned}°");
+        // One body: the carried camera-to-LiDAR transform is the true one.
+        let (want, got) = (true_cam.inverse() * true_lidar, cam.inverse() * lidar);
+        assert!((want.translation.vector - got.translation.vector).norm() < 1e-9);
+        assert!(want.rotation.angle_to(&got.rotation) < 1e-9);
+        // The label image is registered with the camera image and carries its pose.
+        assert_eq!(m.labels.as_ref().unwrap().pose, mi.pose);
+    }
+}

@@ -50,6 +50,7 @@ async fn latest_policy_answers_every_frame_exactly_once() {
         overflow_policy: OverflowPolicy::Latest,
         options: Some(mode(SegmentationMode::None)),
         max_in_flight: n,
+        fusion: None,
     });
     for f in frames {
         tx.send(f).await.expect("send");

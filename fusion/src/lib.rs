@@ -1,0 +1,553 @@
+//! Approach fusion: what a stream remembers of the roof it approaches.
+//!
+//! A drone streams ten scans a second of the roof it is about to land on. Judged alone, each
+//! frame's polygons end at its own outermost points and one frame's segmentation miss can become
+//! an unsafe site. A [`FusionMap`] keeps, per stream and in world coordinates:
+//!
+//! - the scans' points, thinned to one mean point per cubic cell of [`FusionParams::cell_m`];
+//! - per cell, the classes the frames that saw it gave it: one vote per frame (the majority
+//!   class of that frame's points in the cell), so a dense frame does not outvote a sparse one.
+//!   An obstacle vote outweighs [`FusionParams::obstacle_weight`] landable ones, so obstacle
+//!   evidence is not washed out by one contrary frame;
+//! - the keep-out footprints of recent frames' obstacle pixels (`K`, opaque here: the server
+//!   stores the camera's obstacle rays), spread over the approach.
+//!
+//! It is bounded in cells ([`FusionParams::max_cells`], the oldest forgotten first) and in time
+//! ([`FusionParams::horizon_s`]), and starts over ([`Reset`]) when the drone changes, the pose
+//! jumps, time goes backwards or the caller asks. It is plain synchronous code with no I/O: the
+//! server owns one per stream and drops it with the stream.
+//!
+//! ```
+//! use landing_fusion::{FusionMap, FusionParams, Scan};
+//!
+//! let mut map: FusionMap<()> = FusionMap::new(FusionParams::default())?;
+//! let roof: Vec<[f64; 3]> = (0..100).map(|i| [f64::from(i % 10), f64::from(i / 10), 30.0]).collect();
+//! let rooftop = vec![4u8; roof.len()];
+//! for t in 0..3 {
+//!     let mut classes = rooftop.clone();
+//!     if t == 1 {
+//!         classes[55] = 8; // one frame sees an AC unit at (5, 5)
+//!     }
+//!     let scan = Scan { time_s: f64::from(t) * 0.1, sensor: [0.0, -20.0, 50.0], points: &roof,
+//!         classes: Some(&classes), ..Scan::new("drone-1") };
+//!     map.insert(scan);
+//! }
+//! let fused = map.fused([[-1.0, -1.0], [10.0, 10.0]], |c| c == 4);
+//! assert_eq!(fused.points.len(), 100);
+//! let near = |p: &[f64; 3]| (p[0] - 5.0).abs() < 1e-4 && (p[1] - 5.0).abs() < 1e-4;
+//! let at = fused.points.iter().position(near).unwrap();
+//! // Two frames saw rooftop there, one an obstacle: the obstacle stands.
+//! assert_eq!(fused.classes.as_ref().unwrap()[at], 8);
+//! assert_eq!(map.frames(), 3);
+//! # Ok::<(), landing_fusion::FusionError>(())
+//! ```
+
+#![forbid(unsafe_code)]
+
+use std::collections::{HashMap, VecDeque};
+use std::hash::BuildHasherDefault;
+
+/// Number of class ids a cell counts votes for (`landing.v1.SemanticClass` 0..=15).
+pub const CLASSES: usize = 16;
+
+/// Parameters of a [`FusionMap`]. `Default` gives the service's defaults.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FusionParams {
+    /// Side of the cubic cells points are thinned to, metres.
+    pub cell_m: f64,
+    /// Cells not seen for this long, and keep-out footprints older than this, are forgotten,
+    /// seconds.
+    pub horizon_s: f64,
+    /// Most cells held; past it the cells seen longest ago are forgotten.
+    pub max_cells: usize,
+    /// Most frames whose keep-out footprints are kept: the current one and earlier ones at least
+    /// [`FusionParams::keep_out_interval_s`] apart.
+    pub keep_out_frames: usize,
+    /// Least time between two kept keep-out frames, seconds (consecutive frames at 10 Hz see
+    /// nearly the same thing; spreading them covers more of the approach for the same cost).
+    pub keep_out_interval_s: f64,
+    /// A sensor that moves farther than this between consecutive frames starts the map over,
+    /// metres.
+    pub max_jump_m: f64,
+    /// One obstacle vote outweighs this many landable votes.
+    pub obstacle_weight: u32,
+}
+
+impl Default for FusionParams {
+    fn default() -> Self {
+        Self {
+            cell_m: 0.15,
+            horizon_s: 30.0,
+            max_cells: 250_000,
+            keep_out_frames: 8,
+            keep_out_interval_s: 0.5,
+            max_jump_m: 15.0,
+            obstacle_weight: 4,
+        }
+    }
+}
+
+impl FusionParams {
+    /// Checks every field; the error names the first one out of range.
+    pub fn validate(&self) -> Result<(), FusionError> {
+        let bad = |field: &'static str, value: String, reason: &'static str| {
+            Err(FusionError::InvalidParam {
+                field,
+                value,
+                reason,
+            })
+        };
+        if !(self.cell_m >= 0.02 && self.cell_m <= 5.0) {
+            return bad(
+                "cell_size_m",
+                self.cell_m.to_string(),
+                "must be in [0.02, 5]",
+            );
+        }
+        if !(self.horizon_s > 0.0 && self.horizon_s <= 3600.0) {
+            return bad(
+                "horizon_s",
+                self.horizon_s.to_string(),
+                "must be in (0, 3600]",
+            );
+        }
+        if !(1_000..=5_000_000).contains(&self.max_cells) {
+            return bad(
+                "max_cells",
+                self.max_cells.to_string(),
+                "must be in [1000, 5000000]",
+            );
+        }
+        if !(1..=64).contains(&self.keep_out_frames) {
+            return bad(
+                "keep_out_frames",
+                self.keep_out_frames.to_string(),
+                "must be in [1, 64]",
+            );
+        }
+        if !(self.keep_out_interval_s >= 0.0 && self.keep_out_interval_s.is_finite()) {
+            return bad(
+                "keep_out_interval_s",
+                self.keep_out_interval_s.to_string(),
+                "must be finite and >= 0",
+            );
+        }
+        if !(self.max_jump_m > 0.0 && self.max_jump_m.is_finite()) {
+            return bad(
+                "max_jump_m",
+                self.max_jump_m.to_string(),
+                "must be positive and finite",
+            );
+        }
+        if !(1..=1000).contains(&self.obstacle_weight) {
+            return bad(
+                "obstacle_weight",
+                self.obstacle_weight.to_string(),
+                "must be in [1, 1000]",
+            );
+        }
+        Ok(())
+    }
+}
+
+/// Everything that can go wrong here.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum FusionError {
+    /// A parameter is out of range.
+    #[error("fusion parameter `{field}` = {value}: {reason}")]
+    InvalidParam {
+        field: &'static str,
+        value: String,
+        reason: &'static str,
+    },
+}
+
+/// One frame's scan, in the world frame.
+#[derive(Debug, Clone)]
+pub struct Scan<'a, K> {
+    /// The drone; a change starts the map over.
+    pub drone_id: &'a str,
+    /// When the scan was taken, seconds on any clock that does not go backwards.
+    pub time_s: f64,
+    /// Where the sensor was, world frame.
+    pub sensor: [f64; 3],
+    /// The points, world frame. Non-finite points are skipped.
+    pub points: &'a [[f64; 3]],
+    /// One class id per point, when the frame was classified.
+    pub classes: Option<&'a [u8]>,
+    /// The frame's keep-out footprints, when it has any.
+    pub keep_out: Option<K>,
+    /// Start the map over at this scan.
+    pub reset: bool,
+}
+
+impl<'a, K> Scan<'a, K> {
+    /// An empty scan of `drone_id` at time 0, for struct-update syntax.
+    pub fn new(drone_id: &'a str) -> Self {
+        Self {
+            drone_id,
+            time_s: 0.0,
+            sensor: [0.0; 3],
+            points: &[],
+            classes: None,
+            keep_out: None,
+            reset: false,
+        }
+    }
+}
+
+/// Why a map started over.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reset {
+    /// The caller asked.
+    Requested,
+    /// Another drone's frame.
+    DroneChanged,
+    /// The sensor moved `metres` since the previous frame.
+    PoseJump { metres: f64 },
+    /// The frame is older than the previous one.
+    TimeBackwards { seconds: f64 },
+    /// Nothing was fused for longer than the horizon.
+    Gap { seconds: f64 },
+}
+
+impl std::fmt::Display for Reset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Requested => write!(f, "reset requested"),
+            Self::DroneChanged => write!(f, "drone_id changed"),
+            Self::PoseJump { metres } => write!(f, "the sensor jumped {metres:.1} m"),
+            Self::TimeBackwards { seconds } => {
+                write!(f, "the frame is {seconds:.3} s older than the previous one")
+            }
+            Self::Gap { seconds } => write!(f, "no frame for {seconds:.1} s"),
+        }
+    }
+}
+
+/// The map's points inside an answer's bounds, in a deterministic order (by cell).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Fused {
+    /// One mean point per cell, world frame.
+    pub points: Vec<[f64; 3]>,
+    /// The cell's class when any frame classified it (0 where none did).
+    pub classes: Option<Vec<u8>>,
+}
+
+/// A stream's map (see the crate docs).
+#[derive(Debug)]
+pub struct FusionMap<K> {
+    params: FusionParams,
+    /// World position of cell (0, 0, 0)'s corner: the first scan's sensor, so that cell
+    /// coordinates stay small wherever the world origin is.
+    origin: Option<[f64; 3]>,
+    cells: HashMap<[i32; 3], Cell, BuildHasherDefault<std::collections::hash_map::DefaultHasher>>,
+    /// (time, footprints), oldest first; the last is the newest frame's.
+    keep_out: VecDeque<(f64, K)>,
+    drone_id: String,
+    /// Time and sensor position of the previous scan.
+    last: Option<(f64, [f64; 3])>,
+    /// Time of the first scan since the map (re)started.
+    start_s: f64,
+    frames: u32,
+    /// Whether any scan came with classes.
+    classified: bool,
+}
+
+/// One cell: the mean of its points (relative to the map origin) and its votes.
+#[derive(Debug, Clone)]
+struct Cell {
+    mean: [f32; 3],
+    points: u16,
+    /// Frames that gave the cell each class (saturating; halved together when one fills).
+    votes: [u8; CLASSES],
+    /// Time of the last frame that saw the cell, seconds since the map started.
+    seen_s: f32,
+}
+
+/// Cells whose mean weighs at most this many points, so that the mean keeps following new
+/// scans (a drone's pose error changes slowly over an approach).
+const MAX_MEAN_WEIGHT: u16 = 64;
+
+/// Expired cells are looked for every this many frames (and whenever the map is full).
+const EXPIRY_EVERY_FRAMES: u32 = 10;
+
+impl<K> FusionMap<K> {
+    /// An empty map.
+    pub fn new(params: FusionParams) -> Result<Self, FusionError> {
+        params.validate()?;
+        Ok(Self {
+            params,
+            origin: None,
+            cells: HashMap::default(),
+            keep_out: VecDeque::new(),
+            drone_id: String::new(),
+            last: None,
+            start_s: 0.0,
+            frames: 0,
+            classified: false,
+        })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &FusionParams {
+        &self.params
+    }
+
+    /// Forgets everything.
+    pub fn clear(&mut self) {
+        self.origin = None;
+        self.cells.clear();
+        self.keep_out.clear();
+        self.last = None;
+        self.frames = 0;
+        self.classified = false;
+    }
+
+    /// Adds a scan; returns why the map started over first, if it did.
+    pub fn insert(&mut self, scan: Scan<'_, K>) -> Option<Reset> {
+        let reset = if self.last.is_some() && scan.reset {
+            Some(Reset::Requested)
+        } else {
+            self.reset_reason(&scan)
+        };
+        if reset.is_some() {
+            self.clear();
+        }
+        self.drone_id.clear();
+        self.drone_id.push_str(scan.drone_id);
+        let origin = *self.origin.get_or_insert(scan.sensor);
+        if self.last.is_none() {
+            self.start_s = scan.time_s;
+        }
+        self.last = Some((scan.time_s, scan.sensor));
+        self.frames += 1;
+        let seen_s = (scan.time_s - self.start_s) as f32;
+
+        self.add_points(&scan, origin, seen_s);
+        if let Some(k) = scan.keep_out {
+            self.add_keep_out(scan.time_s, k);
+        }
+        self.forget(seen_s);
+        reset
+    }
+
+    /// The map's points whose x/y lie inside `bounds` (`[min, max]`), with the class each cell's
+    /// votes decide: an obstacle (any class `is_landable` rejects, other than 0 = unknown) when
+    /// its votes times [`FusionParams::obstacle_weight`] reach the landable votes, else the most
+    /// voted landable class, else 0.
+    pub fn fused(&self, bounds: [[f64; 2]; 2], is_landable: impl Fn(u8) -> bool) -> Fused {
+        let Some(origin) = self.origin else {
+            return Fused::default();
+        };
+        let c = self.params.cell_m;
+        let mut keys: Vec<&[i32; 3]> = self
+            .cells
+            .iter()
+            .filter(|(key, cell)| {
+                let x = origin[0] + (f64::from(key[0]) + f64::from(cell.mean[0])) * c;
+                let y = origin[1] + (f64::from(key[1]) + f64::from(cell.mean[1])) * c;
+                x >= bounds[0][0] && x <= bounds[1][0] && y >= bounds[0][1] && y <= bounds[1][1]
+            })
+            .map(|(key, _)| key)
+            .collect();
+        keys.sort_unstable();
+        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
+        let weight = self.params.obstacle_weight;
+        let mut points = Vec::with_capacity(keys.len());
+        let mut classes = Vec::with_capacity(if self.classified { keys.len() } else { 0 });
+        for key in keys {
+            let cell = &self.cells[key];
+            points.push(std::array::from_fn(|i| {
+                origin[i] + (f64::from(key[i]) + f64::from(cell.mean[i])) * c
+            }));
+            if self.classified {
+                classes.push(decide(&cell.votes, &landable, weight));
+            }
+        }
+        Fused {
+            points,
+            classes: self.classified.then_some(classes),
+        }
+    }
+
+    /// The kept keep-out footprints, oldest first.
+    pub fn keep_outs(&self) -> impl ExactSizeIterator<Item = &K> {
+        self.keep_out.iter().map(|(_, k)| k)
+    }
+
+    /// Frames fused since the map (re)started.
+    pub fn frames(&self) -> u32 {
+        self.frames
+    }
+
+    /// Cells held.
+    pub fn cells(&self) -> usize {
+        self.cells.len()
+    }
+
+    /// Bytes the cells take (table slots included), not counting the keep-out footprints, whose
+    /// size only their owner knows.
+    pub fn cell_bytes(&self) -> usize {
+        self.cells.capacity() * (std::mem::size_of::<([i32; 3], Cell)>() + 1)
+    }
+
+    fn reset_reason(&self, scan: &Scan<'_, K>) -> Option<Reset> {
+        let (time, sensor) = self.last?;
+        if scan.drone_id != self.drone_id {
+            return Some(Reset::DroneChanged);
+        }
+        if scan.time_s < time {
+            return Some(Reset::TimeBackwards {
+                seconds: time - scan.time_s,
+            });
+        }
+        if scan.time_s - time > self.params.horizon_s {
+            return Some(Reset::Gap {
+                seconds: scan.time_s - time,
+            });
+        }
+        let jump = distance(scan.sensor, sensor);
+        if !(jump <= self.params.max_jump_m) {
+            return Some(Reset::PoseJump { metres: jump });
+        }
+        None
+    }
+}
+
+impl<K> FusionMap<K> {
+    /// Thins the scan into the cells: each frame gives a cell one vote, the majority class of
+    /// its points there.
+    fn add_points(&mut self, scan: &Scan<'_, K>, origin: [f64; 3], seen_s: f32) {
+        let c = self.params.cell_m;
+        let classes = scan.classes.filter(|k| k.len() == scan.points.len());
+        self.classified |= classes.is_some();
+        // (cell, offset in the cell in cell units, class) of every usable point, grouped by cell.
+        let mut keyed: Vec<([i32; 3], [f32; 3], u8)> = Vec::with_capacity(scan.points.len());
+        for (i, p) in scan.points.iter().enumerate() {
+            let rel = [
+                (p[0] - origin[0]) / c,
+                (p[1] - origin[1]) / c,
+                (p[2] - origin[2]) / c,
+            ];
+            // Beyond ±2^30 cells (> 1e7 m at 1 cm cells) a point cannot be binned.
+            if !rel.iter().all(|v| v.is_finite() && v.abs() < 1.0e9) {
+                continue;
+            }
+            let key = rel.map(|v| v.floor() as i32);
+            let offset = std::array::from_fn(|k| (rel[k] - f64::from(key[k])) as f32);
+            let class = classes.map_or(0, |k| k[i]);
+            keyed.push((key, offset, class));
+        }
+        keyed.sort_unstable_by_key(|k| k.0);
+        for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+            let key = group[0].0;
+            let mut counts = [0u32; CLASSES];
+            for &(_, _, class) in group {
+                counts[usize::from(class).min(CLASSES - 1)] += 1;
+            }
+            let cell = self.cells.entry(key).or_insert(Cell {
+                mean: [0.0; 3],
+                points: 0,
+                votes: [0; CLASSES],
+                seen_s,
+            });
+            cell.seen_s = seen_s;
+            for &(_, offset, _) in group {
+                let n = f32::from(cell.points.min(MAX_MEAN_WEIGHT - 1));
+                for k in 0..3 {
+                    cell.mean[k] = (cell.mean[k] * n + offset[k]) / (n + 1.0);
+                }
+                cell.points = cell.points.saturating_add(1);
+            }
+            if classes.is_some() {
+                // The frame's majority class; ties go to the obstacle-most (highest) id.
+                let (class, _) = counts
+                    .iter()
+                    .enumerate()
+                    .max_by_key(|&(i, &n)| (n, i))
+                    .unwrap_or((0, &0));
+                if cell.votes[class] == u8::MAX {
+                    for v in &mut cell.votes {
+                        *v = v.div_ceil(2);
+                    }
+                }
+                cell.votes[class] += 1;
+            }
+        }
+    }
+
+    /// Keeps the newest frame's footprints and older ones spread at least the interval apart.
+    fn add_keep_out(&mut self, time_s: f64, k: K) {
+        let n = self.keep_out.len();
+        if n >= 2
+            && self.keep_out[n - 1].0 - self.keep_out[n - 2].0 < self.params.keep_out_interval_s
+        {
+            // The previous newest did not earn a slot of its own.
+            self.keep_out.pop_back();
+        }
+        self.keep_out.push_back((time_s, k));
+        while self.keep_out.len() > self.params.keep_out_frames {
+            self.keep_out.pop_front();
+        }
+    }
+
+    /// Forgets cells and footprints past the horizon, then the oldest cells past the bound.
+    fn forget(&mut self, now_s: f32) {
+        let horizon = self.params.horizon_s as f32;
+        let newest = self.keep_out.back().map(|(t, _)| *t);
+        self.keep_out
+            .retain(|(t, _)| newest.is_some_and(|n| n - t <= f64::from(horizon)));
+        let full = self.cells.len() > self.params.max_cells;
+        if full || self.frames.is_multiple_of(EXPIRY_EVERY_FRAMES) {
+            self.cells.retain(|_, cell| now_s - cell.seen_s <= horizon);
+        }
+        if self.cells.len() > self.params.max_cells {
+            let excess = self.cells.len() - self.params.max_cells;
+            let mut seen: Vec<f32> = self.cells.values().map(|c| c.seen_s).collect();
+            let (_, cutoff, _) = seen.select_nth_unstable_by(excess, f32::total_cmp);
+            let cutoff = *cutoff;
+            // Older than the cut-off first, then as many seen at it as are needed.
+            self.cells.retain(|_, c| c.seen_s >= cutoff);
+            let mut over = self.cells.len().saturating_sub(self.params.max_cells);
+            if over > 0 {
+                self.cells.retain(|_, c| {
+                    if over > 0 && c.seen_s == cutoff {
+                        over -= 1;
+                        false
+                    } else {
+                        true
+                    }
+                });
+            }
+        }
+    }
+}
+
+/// The class a cell's votes decide (see [`FusionMap::fused`]).
+fn decide(votes: &[u8; CLASSES], landable: &[bool; CLASSES], weight: u32) -> u8 {
+    let (mut obstacle, mut safe) = (0u32, 0u32);
+    let (mut top_obstacle, mut top_safe) = ((0u8, 0u8), (0u8, 0u8));
+    for (class, &n) in votes.iter().enumerate().skip(1) {
+        let pick = (n, class as u8);
+        if landable[class] {
+            safe += u32::from(n);
+            top_safe = top_safe.max(pick);
+        } else {
+            obstacle += u32::from(n);
+            top_obstacle = top_obstacle.max(pick);
+        }
+    }
+    if obstacle > 0 && obstacle * weight >= safe {
+        top_obstacle.1
+    } else if safe > 0 {
+        top_safe.1
+    } else {
+        0
+    }
+}
+
+fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}

@@ -1,0 +1,303 @@
+//! The fusion map alone: class evidence, resets, bounds in cells and time, keep-out memory, and
+//! independence from the world origin.
+
+use landing_fusion::{FusionMap, FusionParams, Reset, Scan};
+use proptest::prelude::*;
+
+const ROOFTOP: u8 = 4;
+const AC_UNIT: u8 = 8;
+
+fn landable(c: u8) -> bool {
+    c == ROOFTOP
+}
+
+/// A 10 × 10 m roof 30 m up sampled every 0.5 m, shifted by `offset`. The coordinates stay off
+/// the cell boundaries of a map anchored at [`SENSOR`]: a point exactly on one may fall on
+/// either side once rounded, wherever the origin is.
+fn roof(offset: [f64; 3]) -> Vec<[f64; 3]> {
+    (0..400)
+        .map(|i| {
+            let (x, y) = (
+                f64::from(i % 20) * 0.5 + 0.1037,
+                f64::from(i / 20) * 0.5 + 0.0913,
+            );
+            [x + offset[0], y + offset[1], 30.037 + offset[2]]
+        })
+        .collect()
+}
+
+const SENSOR: [f64; 3] = [5.0, -20.0, 60.0];
+
+fn map() -> FusionMap<u32> {
+    FusionMap::new(FusionParams::default()).unwrap()
+}
+
+fn scan<'a>(t: f64, points: &'a [[f64; 3]], classes: &'a [u8]) -> Scan<'a, u32> {
+    Scan {
+        time_s: t,
+        sensor: SENSOR,
+        points,
+        classes: Some(classes),
+        ..Scan::new("d")
+    }
+}
+
+/// The fused class at the roof point `i`.
+fn class_at(map: &FusionMap<u32>, p: [f64; 3]) -> u8 {
+    let f = map.fused([[-100.0, -100.0], [100.0, 100.0]], landable);
+    let i = f
+        .points
+        .iter()
+        .position(|q| (q[0] - p[0]).abs() < 1e-3 && (q[1] - p[1]).abs() < 1e-3)
+        .expect("the point's cell");
+    f.classes.unwrap()[i]
+}
+
+#[test]
+fn an_obstacle_vote_outweighs_up_to_weight_landable_ones() {
+    let pts = roof([0.0; 3]);
+    let rooftop = vec![ROOFTOP; pts.len()];
+    let mut ac = rooftop.clone();
+    ac[210] = AC_UNIT;
+    let mut m = map();
+    m.insert(scan(0.0, &pts, &ac));
+    for k in 1..=4 {
+        m.insert(scan(f64::from(k) * 0.1, &pts, &rooftop));
+        assert_eq!(class_at(&m, pts[210]), AC_UNIT, "after {k} contrary frames");
+    }
+    m.insert(scan(0.5, &pts, &rooftop));
+    assert_eq!(
+        class_at(&m, pts[210]),
+        ROOFTOP,
+        "5 landable votes beat one obstacle"
+    );
+    // Every other cell stayed rooftop, and the points were not duplicated.
+    let f = m.fused([[-100.0, -100.0], [100.0, 100.0]], landable);
+    assert_eq!(f.points.len(), pts.len());
+    assert_eq!(
+        f.classes.unwrap().iter().filter(|&&c| c == ROOFTOP).count(),
+        pts.len()
+    );
+}
+
+#[test]
+fn unclassified_cells_are_unknown_and_unclassified_maps_have_no_classes() {
+    let pts = roof([0.0; 3]);
+    let mut m = map();
+    m.insert(Scan {
+        points: &pts,
+        sensor: SENSOR,
+        ..Scan::new("d")
+    });
+    assert!(m.fused([[-1e3; 2], [1e3; 2]], landable).classes.is_none());
+    let other: Vec<[f64; 3]> = pts.iter().map(|p| [p[0] + 20.0, p[1], p[2]]).collect();
+    let classes = vec![ROOFTOP; other.len()];
+    m.insert(scan(0.1, &other, &classes));
+    let f = m.fused([[-1e3; 2], [1e3; 2]], landable);
+    let classes = f.classes.unwrap();
+    assert_eq!(classes.len(), 2 * pts.len());
+    assert_eq!(classes.iter().filter(|&&c| c == 0).count(), pts.len());
+}
+
+#[test]
+fn each_reset_reason_starts_over() {
+    let pts = roof([0.0; 3]);
+    let classes = vec![ROOFTOP; pts.len()];
+    let mut m = map();
+    assert_eq!(m.insert(scan(1.0, &pts, &classes)), None);
+    assert_eq!(m.insert(scan(1.1, &pts, &classes)), None);
+    assert_eq!(m.frames(), 2);
+    let requested = Scan {
+        reset: true,
+        ..scan(1.2, &pts, &classes)
+    };
+    assert_eq!(m.insert(requested), Some(Reset::Requested));
+    assert_eq!(m.frames(), 1);
+    let other = Scan {
+        drone_id: "e",
+        ..scan(1.3, &pts, &classes)
+    };
+    assert_eq!(m.insert(other), Some(Reset::DroneChanged));
+    let jumped = Scan {
+        drone_id: "e",
+        sensor: [500.0, -20.0, 60.0],
+        ..scan(1.4, &pts, &classes)
+    };
+    assert!(matches!(m.insert(jumped), Some(Reset::PoseJump { metres }) if metres > 400.0));
+    let back = Scan {
+        drone_id: "e",
+        sensor: [500.0, -20.0, 60.0],
+        ..scan(1.0, &pts, &classes)
+    };
+    assert!(matches!(m.insert(back), Some(Reset::TimeBackwards { .. })));
+    let late = Scan {
+        drone_id: "e",
+        sensor: [500.0, -20.0, 60.0],
+        ..scan(100.0, &pts, &classes)
+    };
+    assert!(matches!(m.insert(late), Some(Reset::Gap { .. })));
+    assert_eq!(m.frames(), 1);
+    assert_eq!(m.cells(), pts.len());
+    // Starting over is not a reason on the first frame.
+    let mut fresh = map();
+    let first = Scan {
+        reset: true,
+        ..scan(0.0, &pts, &classes)
+    };
+    assert_eq!(fresh.insert(first), None);
+}
+
+#[test]
+fn answers_hold_only_the_cells_inside_the_bounds() {
+    let pts = roof([0.0; 3]);
+    let classes = vec![ROOFTOP; pts.len()];
+    let mut m = map();
+    m.insert(scan(0.0, &pts, &classes));
+    let f = m.fused([[0.0, 0.0], [5.0, 5.0]], landable);
+    assert!(!f.points.is_empty() && f.points.len() < pts.len());
+    assert!(
+        f.points
+            .iter()
+            .all(|p| (0.0..=5.0).contains(&p[0]) && (0.0..=5.0).contains(&p[1]))
+    );
+    assert_eq!(f.points.len(), f.classes.unwrap().len());
+}
+
+#[test]
+fn cells_are_bounded_in_number_and_time() {
+    let params = FusionParams {
+        max_cells: 1_000,
+        horizon_s: 2.0,
+        ..FusionParams::default()
+    };
+    let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+    // The drone flies on, scanning new ground every frame.
+    for k in 0..40 {
+        let pts = roof([f64::from(k) * 0.5, 0.0, 0.0]);
+        let classes = vec![ROOFTOP; pts.len()];
+        let s = Scan {
+            sensor: [f64::from(k) * 0.5, -20.0, 60.0],
+            ..scan(f64::from(k) * 0.1, &pts, &classes)
+        };
+        m.insert(s);
+        assert!(m.cells() <= 1_000, "frame {k}: {} cells", m.cells());
+    }
+    assert!(m.cell_bytes() < 1_000 * 200, "{} bytes", m.cell_bytes());
+    // The newest scan's cells are the ones kept.
+    let newest = roof([39.0 * 0.5, 0.0, 0.0]);
+    let f = m.fused([[19.5, 0.0], [29.5, 10.0]], landable);
+    assert!(f.points.len() >= newest.len(), "{}", f.points.len());
+
+    // Time: a cell not seen for longer than the horizon is forgotten.
+    let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+    let old = roof([0.0; 3]);
+    let classes = vec![ROOFTOP; old.len()];
+    m.insert(scan(0.0, &old, &classes));
+    let new = roof([12.0, 0.0, 0.0]);
+    for k in 1..=30 {
+        m.insert(scan(f64::from(k) * 0.1, &new, &classes));
+    }
+    assert_eq!(m.cells(), new.len());
+}
+
+#[test]
+fn keep_out_memory_spreads_frames_over_the_approach() {
+    let params = FusionParams {
+        keep_out_frames: 4,
+        keep_out_interval_s: 0.5,
+        ..FusionParams::default()
+    };
+    let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+    let pts = roof([0.0; 3]);
+    for k in 0..30u32 {
+        let s = Scan {
+            time_s: f64::from(k) * 0.1,
+            points: &pts,
+            keep_out: Some(k),
+            ..Scan::new("d")
+        };
+        m.insert(s);
+        let kept: Vec<u32> = m.keep_outs().copied().collect();
+        assert_eq!(kept.last(), Some(&k), "the current frame is always kept");
+        assert!(kept.len() <= 4);
+        // Every kept frame but the newest is at least 0.5 s after the one before it.
+        for w in kept[..kept.len() - 1].windows(2) {
+            assert!(w[1] - w[0] >= 5, "{kept:?}");
+        }
+    }
+    assert_eq!(m.keep_outs().len(), 4);
+}
+
+#[test]
+fn bad_parameters_name_their_field() {
+    let err = FusionMap::<u32>::new(FusionParams {
+        cell_m: 0.0,
+        ..FusionParams::default()
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("cell_size_m"), "{err}");
+    let err = FusionMap::<u32>::new(FusionParams {
+        max_jump_m: f64::NAN,
+        ..FusionParams::default()
+    })
+    .unwrap_err();
+    assert!(err.to_string().contains("max_jump_m"), "{err}");
+}
+
+proptest! {
+    /// Wherever the world origin is (up to the API's 1e7 m), the map gives the same points,
+    /// moved by the offset, and the same classes.
+    #[test]
+    fn results_do_not_depend_on_the_world_origin(
+        ox in -1.0e7..1.0e7f64, oy in -1.0e7..1.0e7f64, oz in -1.0e3..1.0e3f64, frames in 1usize..6,
+    ) {
+        let run = |offset: [f64; 3]| {
+            let mut m = map();
+            for k in 0..frames {
+                let pts = roof([offset[0] + k as f64 * 0.07, offset[1], offset[2]]);
+                let mut classes = vec![ROOFTOP; pts.len()];
+                classes[k * 13] = AC_UNIT;
+                let s = Scan {
+                    sensor: [offset[0] + 5.0, offset[1] - 20.0, offset[2] + 60.0],
+                    ..scan(k as f64 * 0.1, &pts, &classes)
+                };
+                m.insert(s);
+            }
+            let b = [[offset[0] - 1.0, offset[1] - 1.0], [offset[0] + 12.0, offset[1] + 12.0]];
+            m.fused(b, landable)
+        };
+        let here = run([0.0; 3]);
+        let there = run([ox, oy, oz]);
+        prop_assert_eq!(&here.classes, &there.classes);
+        prop_assert_eq!(here.points.len(), there.points.len());
+        for (a, b) in here.points.iter().zip(&there.points) {
+            prop_assert!((a[0] + ox - b[0]).abs() < 1e-3);
+            prop_assert!((a[1] + oy - b[1]).abs() < 1e-3);
+            prop_assert!((a[2] + oz - b[2]).abs() < 1e-3);
+        }
+    }
+
+    /// Arbitrary scans, classes and times never break the bounds, and answers stay in bounds.
+    #[test]
+    fn arbitrary_scans_keep_the_invariants(
+        scans in prop::collection::vec(
+            (prop::collection::vec((-50.0..50.0f64, -50.0..50.0f64, 0.0..40.0f64, 0u8..20), 0..300),
+             0.0..0.3f64, any::<bool>()),
+            1..12),
+    ) {
+        let params = FusionParams { max_cells: 1_000, ..FusionParams::default() };
+        let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+        let mut t = 0.0;
+        for (points, dt, reset) in &scans {
+            t += dt;
+            let pts: Vec<[f64; 3]> = points.iter().map(|p| [p.0, p.1, p.2]).collect();
+            let classes: Vec<u8> = points.iter().map(|p| p.3).collect();
+            m.insert(Scan { reset: *reset, ..scan(t, &pts, &classes) });
+            prop_assert!(m.cells() <= 1_000);
+            let f = m.fused([[-10.0, -10.0], [10.0, 10.0]], landable);
+            prop_assert!(f.points.iter().all(|p| p[0].abs() <= 10.0 && p[1].abs() <= 10.0));
+            prop_assert!(f.classes.as_ref().is_none_or(|c| c.len() == f.points.len()));
+            prop_assert!(f.classes.as_ref().is_none_or(|c| c.iter().all(|&k| k < 16)));
+        }
+    }
+}
