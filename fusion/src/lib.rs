@@ -377,6 +377,11 @@ impl<K> FusionMap<K> {
         self.keep_out.iter().map(|(_, k)| k)
     }
 
+    /// Time of the newest scan, when there is one.
+    pub fn last_time_s(&self) -> Option<f64> {
+        self.last.map(|(t, _)| t)
+    }
+
     /// Frames fused since the map (re)started.
     pub fn frames(&self) -> u32 {
         self.frames
@@ -409,7 +414,7 @@ impl<K> FusionMap<K> {
             });
         }
         let jump = distance(scan.sensor, sensor);
-        if !(jump <= self.params.max_jump_m) {
+        if jump.is_nan() || jump > self.params.max_jump_m {
             return Some(Reset::PoseJump { metres: jump });
         }
         None
@@ -456,8 +461,8 @@ impl<K> FusionMap<K> {
             cell.seen_s = seen_s;
             for &(_, offset, _) in group {
                 let n = f32::from(cell.points.min(MAX_MEAN_WEIGHT - 1));
-                for k in 0..3 {
-                    cell.mean[k] = (cell.mean[k] * n + offset[k]) / (n + 1.0);
+                for (mean, o) in cell.mean.iter_mut().zip(offset) {
+                    *mean = (*mean * n + o) / (n + 1.0);
                 }
                 cell.points = cell.points.saturating_add(1);
             }

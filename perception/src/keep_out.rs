@@ -134,6 +134,12 @@ impl ObstacleRays {
         }
     }
 
+    /// Bytes the rays hold on the heap (a fused stream keeps several frames' rays).
+    pub fn heap_bytes(&self) -> usize {
+        self.rays.capacity() * std::mem::size_of::<Vector3<f64>>()
+            + self.tops.capacity() * std::mem::size_of::<Option<Point3<f64>>>()
+    }
+
     /// Number of obstacle blocks.
     pub fn len(&self) -> usize {
         self.rays.len()

@@ -19,6 +19,58 @@ pub struct Config {
     pub auth: AuthConfig,
     pub tls: TlsConfig,
     pub log: LogConfig,
+    pub fusion: FusionConfig,
+}
+
+/// `[fusion]`: the defaults of streams that ask for approach fusion (`FusionOptions`); a stream
+/// may ask for other values, but never for more cells than `max_cells`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FusionConfig {
+    /// Side of the map's cells, metres.
+    pub cell_size_m: f64,
+    /// Cells and keep-out footprints older than this are forgotten, seconds.
+    pub horizon_s: f64,
+    /// Most cells per stream: the bound of a map's memory (about 60 bytes a cell).
+    pub max_cells: u32,
+    /// Most frames whose keep-out footprints a map keeps.
+    pub keep_out_frames: u32,
+    /// Least time between two kept keep-out frames, seconds.
+    pub keep_out_interval_s: f64,
+    /// A sensor jump longer than this between frames starts a map over, metres.
+    pub max_jump_m: f64,
+    /// One obstacle vote outweighs this many landable votes.
+    pub obstacle_weight: u32,
+}
+
+impl Default for FusionConfig {
+    fn default() -> Self {
+        let p = landing_fusion::FusionParams::default();
+        Self {
+            cell_size_m: p.cell_m,
+            horizon_s: p.horizon_s,
+            max_cells: u32::try_from(p.max_cells).unwrap_or(u32::MAX),
+            keep_out_frames: u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX),
+            keep_out_interval_s: p.keep_out_interval_s,
+            max_jump_m: p.max_jump_m,
+            obstacle_weight: p.obstacle_weight,
+        }
+    }
+}
+
+impl FusionConfig {
+    /// The map parameters these defaults describe.
+    pub fn params(&self) -> landing_fusion::FusionParams {
+        landing_fusion::FusionParams {
+            cell_m: self.cell_size_m,
+            horizon_s: self.horizon_s,
+            max_cells: self.max_cells as usize,
+            keep_out_frames: self.keep_out_frames as usize,
+            keep_out_interval_s: self.keep_out_interval_s,
+            max_jump_m: self.max_jump_m,
+            obstacle_weight: self.obstacle_weight,
+        }
+    }
 }
 
 /// `[server]`: listeners and limits.
@@ -322,6 +374,20 @@ impl Config {
             if set(path) {
                 require_file(key, path)?;
             }
+        }
+        match self.fusion.params().validate() {
+            Ok(()) => {}
+            Err(landing_fusion::FusionError::InvalidParam {
+                field,
+                value,
+                reason,
+            }) => {
+                return Err(Error::config(
+                    format!("fusion.{field}"),
+                    format!("{value}: {reason}"),
+                ));
+            }
+            Err(e) => return Err(Error::config("fusion", e.to_string())),
         }
         if !matches!(self.log.format.as_str(), "pretty" | "json") {
             return Err(Error::config(

@@ -733,6 +733,61 @@ impl From<SegmentationMode> for v1::SegmentationMode {
     }
 }
 
+/// The map parameters a stream asks for: `defaults` (the server's `[fusion]`) where a field is
+/// unset; never more cells than the defaults allow. Errors name the field
+/// (`fusion.cell_size_m`).
+pub fn fusion_params(
+    asked: &v1::FusionOptions,
+    defaults: &landing_fusion::FusionParams,
+) -> Result<landing_fusion::FusionParams, Error> {
+    let mut p = *defaults;
+    if let Some(v) = asked.cell_size_m {
+        p.cell_m = v;
+    }
+    if let Some(v) = asked.horizon_s {
+        p.horizon_s = v;
+    }
+    if let Some(v) = asked.max_cells {
+        if v as usize > defaults.max_cells {
+            return Err(Error::invalid(
+                "fusion.max_cells",
+                format!("{v} is above this server's limit of {}", defaults.max_cells),
+            ));
+        }
+        p.max_cells = v as usize;
+    }
+    if let Some(v) = asked.keep_out_frames {
+        p.keep_out_frames = v as usize;
+    }
+    if let Some(v) = asked.max_jump_m {
+        p.max_jump_m = v;
+    }
+    match p.validate() {
+        Ok(()) => Ok(p),
+        Err(landing_fusion::FusionError::InvalidParam {
+            field,
+            value,
+            reason,
+        }) => Err(Error::invalid(
+            format!("fusion.{field}"),
+            format!("{value}: {reason}"),
+        )),
+        Err(e) => Err(Error::invalid("fusion", e.to_string())),
+    }
+}
+
+/// The server's fusion defaults as the proto reports them (`ServiceInfo.default_fusion`).
+pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
+    v1::FusionOptions {
+        enabled: false,
+        cell_size_m: Some(p.cell_m),
+        horizon_s: Some(p.horizon_s),
+        max_cells: Some(u32::try_from(p.max_cells).unwrap_or(u32::MAX)),
+        keep_out_frames: Some(u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX)),
+        max_jump_m: Some(p.max_jump_m),
+    }
+}
+
 /// The defaults as the `PipelineOptions` message that `GetServiceInfo` reports.
 pub fn default_options(p: &Params) -> v1::PipelineOptions {
     v1::PipelineOptions {
@@ -824,7 +879,13 @@ impl From<&FrameOutput> for v1::FrameResult {
             point_count: count(o.point_count),
             triangle_count: count(o.triangle_count),
             timings: Some(v1::StageTimings::from(&o.timings)),
-            fusion: None,
+            fusion: o.fusion.as_ref().map(|f| v1::FusionSummary {
+                frames: f.frames,
+                points: count(f.points),
+                cells: count(f.cells),
+                reset_reason: f.reset.clone().unwrap_or_default(),
+                keep_out_frames: count(f.keep_out_frames),
+            }),
         }
     }
 }

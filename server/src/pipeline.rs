@@ -6,7 +6,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use landing_fusion::{FusionMap, Scan};
 use landing_geometry::{Disk, Params};
+use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
 use crate::Error;
@@ -82,7 +84,23 @@ pub struct FrameOutput {
     pub point_count: usize,
     pub triangle_count: usize,
     pub timings: StageTimings,
+    /// What a fused stream's answer came from; `None` for a frame judged alone.
+    pub fusion: Option<FusionSummary>,
 }
+
+/// The map a fused answer came from (`landing.v1.FusionSummary`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FusionSummary {
+    pub frames: u32,
+    pub points: usize,
+    pub cells: usize,
+    /// Why the map started over at this frame.
+    pub reset: Option<String>,
+    pub keep_out_frames: usize,
+}
+
+/// A stream's fusion map: cells of the scans and the obstacle rays of recent frames' masks.
+pub type StreamMap = FusionMap<ObstacleRays>;
 
 /// What the pipeline needs besides the frame: the default parameters and the segmentation model.
 #[derive(Clone, Default)]
@@ -172,6 +190,91 @@ pub fn run_pipeline(
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
+    let c = classify(frame, options, pipeline)?;
+    let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
+    let located = Located {
+        world: &c.world,
+        classes: c.classes.as_deref(),
+        keep_out: &keep_out,
+    };
+    locate(frame, located, options, c.mode, c.timings, start)
+}
+
+/// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
+/// stream's `map`, and the answer is computed from the map's points inside the frame's scan
+/// footprint (the x/y bounds of its points), keeping clear of the keep-out footprints of every
+/// frame the map remembers. `reset` starts the map over first. A frame without a timestamp
+/// counts as taken at the previous frame's time.
+pub fn run_fused(
+    frame: &Frame,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+    map: &mut StreamMap,
+    reset: bool,
+) -> Result<FrameOutput, Error> {
+    let start = Instant::now();
+    let mut c = classify(frame, options, pipeline)?;
+    let points = to_world_f64(&frame.cloud);
+    let time_s = frame
+        .timestamp
+        .map(|t| t.seconds as f64 + f64::from(t.nanos) * 1e-9)
+        .or(map.last_time_s())
+        .unwrap_or(0.0);
+    let t = frame.cloud.pose.translation.vector;
+    let reset = map.insert(Scan {
+        drone_id: &frame.drone_id,
+        time_s,
+        sensor: [t.x, t.y, t.z],
+        points: &points,
+        classes: c.classes.as_deref(),
+        keep_out: c.obstacles.take(),
+        reset,
+    });
+    let mut bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
+    for p in &points {
+        for k in 0..2 {
+            bounds[0][k] = bounds[0][k].min(p[k]);
+            bounds[1][k] = bounds[1][k].max(p[k]);
+        }
+    }
+    let landable = &options.params.landable_classes;
+    let fused = map.fused(bounds, |class| landable.contains(&class));
+    let world: Vec<[f32; 3]> = fused.points.iter().map(|p| p.map(|v| v as f32)).collect();
+    let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
+    let summary = FusionSummary {
+        frames: map.frames(),
+        points: world.len(),
+        cells: map.cells(),
+        reset: reset.map(|r| r.to_string()),
+        keep_out_frames: keep_out.len(),
+    };
+    let located = Located {
+        world: &world,
+        classes: fused.classes.as_deref(),
+        keep_out: &keep_out,
+    };
+    let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
+    out.fusion = Some(summary);
+    Ok(out)
+}
+
+/// A frame's points with their classes, before geometry.
+struct Classified {
+    /// The cloud in the world frame.
+    world: Vec<[f32; 3]>,
+    classes: Option<Vec<u8>>,
+    /// The class mask's obstacle pixels, when a mask classified the points.
+    obstacles: Option<ObstacleRays>,
+    mode: SegmentationMode,
+    timings: StageTimings,
+}
+
+/// Decodes the frame's images and classifies its points per the mode.
+fn classify(
+    frame: &Frame,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+) -> Result<Classified, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
 
@@ -191,8 +294,7 @@ pub fn run_pipeline(
     }
     let landable = &options.params.landable_classes;
     let mut obstacles = None;
-    let mask_classes;
-    let classes: Option<&[u8]> = match mode {
+    let classes: Option<Vec<u8>> = match mode {
         SegmentationMode::Model => {
             let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
                 (Some(d), Some(segmenter)) => (d, segmenter),
@@ -202,9 +304,8 @@ pub fn run_pipeline(
             let out = segmenter.classify(camera, rgb, &world, landable)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
-            mask_classes = out.classes;
             obstacles = Some(out.obstacles);
-            Some(&mask_classes)
+            Some(out.classes)
         }
         SegmentationMode::ClassImage => {
             let Some((camera, mask)) = &class_mask else {
@@ -214,27 +315,57 @@ pub fn run_pipeline(
             };
             let out = segmentation::classify_with_mask(camera, mask, &world, landable);
             timings.classification = Some(out.classification);
-            mask_classes = out.classes;
             obstacles = Some(out.obstacles);
-            Some(&mask_classes)
+            Some(out.classes)
         }
-        SegmentationMode::PointClasses => frame.cloud.classes.as_deref(),
+        SegmentationMode::PointClasses => frame.cloud.classes.clone(),
         SegmentationMode::None | SegmentationMode::Auto => None,
     };
+    Ok(Classified {
+        world,
+        classes,
+        obstacles,
+        mode,
+        timings,
+    })
+}
+
+/// What the geometry runs on: world points, their classes, and the obstacle rays whose
+/// footprints safe circles keep clear of.
+struct Located<'a> {
+    world: &'a [[f32; 3]],
+    classes: Option<&'a [u8]>,
+    keep_out: &'a [&'a ObstacleRays],
+}
+
+/// The geometry on classified world points, and the world/geodetic results.
+fn locate(
+    frame: &Frame,
+    input: Located<'_>,
+    options: &FrameOptions,
+    mode: SegmentationMode,
+    mut timings: StageTimings,
+    start: Instant,
+) -> Result<FrameOutput, Error> {
+    let Located {
+        world,
+        classes,
+        keep_out,
+    } = input;
 
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
     // what fell between the LiDAR's scan lines.
-    let detection = match &obstacles {
-        Some(rays) => {
-            let keep_out = |point, normal, bounds| {
-                rays.on_plane(point, normal, bounds)
-                    .into_iter()
-                    .map(|(center, radius)| Disk { center, radius })
-                    .collect()
-            };
-            landing_geometry::detect_keeping_out(&world, classes, &options.params, &keep_out)?
-        }
-        None => landing_geometry::detect(&world, classes, &options.params)?,
+    let detection = if keep_out.is_empty() {
+        landing_geometry::detect(world, classes, &options.params)?
+    } else {
+        let disks = |point, normal, bounds| {
+            keep_out
+                .iter()
+                .flat_map(|rays| rays.on_plane(point, normal, bounds))
+                .map(|(center, radius)| Disk { center, radius })
+                .collect()
+        };
+        landing_geometry::detect_keeping_out(world, classes, &options.params, &disks)?
     };
     let t = detection.timings;
     timings.triangulation = Some(t.triangulation);
@@ -274,7 +405,20 @@ pub fn run_pipeline(
         point_count: world.len(),
         triangle_count: detection.triangle_count,
         timings,
+        fusion: None,
     })
+}
+
+/// The cloud's points in the world frame, in double precision.
+fn to_world_f64(cloud: &Cloud) -> Vec<[f64; 3]> {
+    cloud
+        .points
+        .iter()
+        .map(|p| {
+            let w = cloud.pose * Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            [w.x, w.y, w.z]
+        })
+        .collect()
 }
 
 /// The cloud's points moved to the world frame by its pose (skipped for the identity).

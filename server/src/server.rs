@@ -145,6 +145,7 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         dispatcher: dispatcher.clone(),
         stream_buffer: config.pipeline.stream_buffer as usize,
         max_request_bytes: config.server.max_request_bytes,
+        fusion: config.fusion.params(),
         draining: drain_rx,
     };
     let landing = LandingServiceServer::new(service)

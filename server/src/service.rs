@@ -12,8 +12,9 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::auth::Arrived;
 use crate::convert;
+use crate::pipeline::StreamMap;
 use crate::status::{to_rpc_status, to_status};
-use crate::workers::{Dispatcher, Done};
+use crate::workers::{Dispatcher, Done, FusionTurn, StreamFusion};
 
 /// The service state shared by every call.
 #[derive(Debug, Clone)]
@@ -21,6 +22,8 @@ pub(crate) struct LandingService {
     pub dispatcher: Arc<Dispatcher>,
     pub stream_buffer: usize,
     pub max_request_bytes: u64,
+    /// Defaults and limits of streams that fuse.
+    pub fusion: landing_fusion::FusionParams,
     /// Flips to true when the server starts draining: open streams stop reading.
     pub draining: watch::Receiver<bool>,
 }
@@ -91,7 +94,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         // Awaited in place: if the caller goes away, tonic drops this future and the frame stops.
         match self
             .dispatcher
-            .process("unary", parts, deadline, never())
+            .process("unary", parts, deadline, never(), None)
             .await
         {
             Done::Computed(out) => Ok(Response::new(v1::DetectLandingSitesResponse {
@@ -118,6 +121,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         let (latest_tx, latest_rx) = watch::channel((0u64, 0u64));
         let (cancel_tx, mut cancel_rx) = watch::channel(false);
         let dispatcher = self.dispatcher.clone();
+        let fusion_defaults = self.fusion;
         let mut draining = self.draining.clone();
         dispatcher.metrics.streams(1.0);
 
@@ -127,7 +131,9 @@ impl v1::landing_service_server::LandingService for LandingService {
         tokio::spawn(async move {
             let dispatcher = reader_dispatcher;
             let mut latest_policy = None;
-            let mut fusion_policy = None;
+            let mut fusion_policy: Option<Option<Result<Arc<StreamFusion>, crate::Error>>> = None;
+            // The previous fused frame's signal: the next one fuses after it.
+            let mut previous = None;
             let mut index = 0u64;
             loop {
                 if *draining.borrow() {
@@ -156,17 +162,37 @@ impl v1::landing_service_server::LandingService for LandingService {
                 let sequence = request.frame.as_ref().map_or(0, |f| f.sequence);
                 index += 1;
                 latest_tx.send_replace((index, sequence));
-                let asks_fusion = *fusion_policy
-                    .get_or_insert(request.fusion.as_ref().is_some_and(|f| f.enabled));
-                let parts = if asks_fusion {
-                    // FIXME(issue 16): the fusion map exists (`landing-fusion`); the server does
-                    // not use it yet, so a stream that asks for it is told, frame by frame.
-                    Err(crate::Error::invalid(
-                        "fusion.enabled",
-                        "approach fusion is not served by this server version",
-                    ))
-                } else {
-                    convert::stream_parts(&request, &dispatcher.pipeline.defaults)
+                // The first message decides whether the stream fuses, and with what map.
+                let fusion = fusion_policy.get_or_insert_with(|| {
+                    let asked = request.fusion.as_ref().filter(|f| f.enabled)?;
+                    Some(
+                        convert::fusion_params(asked, &fusion_defaults).and_then(|params| {
+                            let map = StreamMap::new(params)
+                                .map_err(|e| crate::Error::invalid("fusion", e.to_string()))?;
+                            dispatcher.metrics.fusion_maps(1.0);
+                            Ok(Arc::new(StreamFusion {
+                                map: Arc::new(std::sync::Mutex::new(map)),
+                                bytes: Default::default(),
+                                metrics: dispatcher.metrics.clone(),
+                            }))
+                        }),
+                    )
+                });
+                let parts = match fusion {
+                    Some(Err(e)) => Err(e.clone()),
+                    _ => convert::stream_parts(&request, &dispatcher.pipeline.defaults),
+                };
+                let turn = match fusion {
+                    Some(Ok(stream)) => {
+                        let (done, next) = tokio::sync::oneshot::channel();
+                        Some(FusionTurn {
+                            stream: stream.clone(),
+                            after: previous.replace(next),
+                            done,
+                            reset: request.reset_fusion,
+                        })
+                    }
+                    _ => None,
                 };
                 drop(request);
                 let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =
@@ -183,7 +209,8 @@ impl v1::landing_service_server::LandingService for LandingService {
                     } else {
                         Box::pin(never())
                     };
-                let job = tokio::spawn(dispatcher.process("stream", parts, deadline, superseded));
+                let job =
+                    tokio::spawn(dispatcher.process("stream", parts, deadline, superseded, turn));
                 if pending_tx.send((sequence, job)).await.is_err() {
                     break;
                 }
@@ -242,8 +269,7 @@ impl v1::landing_service_server::LandingService for LandingService {
             classes,
             default_options: Some(convert::default_options(&pipeline.defaults)),
             max_request_bytes: self.max_request_bytes,
-            // Approach fusion is not served yet: streams that ask for it get INVALID_ARGUMENT.
-            default_fusion: None,
+            default_fusion: Some(convert::default_fusion(&self.fusion)),
         }))
     }
 }

@@ -137,6 +137,15 @@ impl Metrics {
             );
             metrics::describe_gauge!("landing_in_flight", "Frames being computed on a worker.");
             metrics::describe_gauge!("landing_streams_open", "Open detection streams.");
+            metrics::describe_gauge!(
+                "landing_fusion_maps_open",
+                "Fusion maps held: one per open stream that fuses."
+            );
+            metrics::describe_gauge!(
+                "landing_fusion_map_bytes",
+                metrics::Unit::Bytes,
+                "Memory the open fusion maps hold (cells and kept obstacle rays)."
+            );
         });
     }
 
@@ -171,6 +180,16 @@ impl Metrics {
     /// Adds `delta` to the open-streams gauge.
     pub fn streams(&self, delta: f64) {
         self.with(|| metrics::gauge!("landing_streams_open").increment(delta));
+    }
+
+    /// Moves the open fusion map count by `delta`.
+    pub fn fusion_maps(&self, delta: f64) {
+        self.with(|| metrics::gauge!("landing_fusion_maps_open").increment(delta));
+    }
+
+    /// Moves the fusion maps' memory by `delta` bytes.
+    pub fn fusion_bytes(&self, delta: f64) {
+        self.with(|| metrics::gauge!("landing_fusion_map_bytes").increment(delta));
     }
 
     /// The Prometheus text exposition of every metric.

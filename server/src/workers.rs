@@ -11,7 +11,9 @@ use tokio::sync::Semaphore;
 use tracing::Instrument as _;
 
 use crate::Error;
-use crate::pipeline::{Frame, FrameOptions, FrameOutput, Pipeline, run_pipeline};
+use crate::pipeline::{
+    Frame, FrameOptions, FrameOutput, Pipeline, StreamMap, run_fused, run_pipeline,
+};
 use crate::telemetry::{Metrics, Outcome};
 
 /// How a frame ended.
@@ -23,6 +25,35 @@ pub(crate) enum Done {
     Skipped {
         superseded_by: u64,
     },
+}
+
+/// A fused stream's frame: the stream's map, the turn that follows the previous frame's fusion
+/// (frames of one stream are fused in arrival order, one at a time), and the signal for the
+/// next frame, sent when this one's computation ends (dropped, whatever the outcome).
+#[derive(Debug)]
+pub(crate) struct FusionTurn {
+    pub stream: Arc<StreamFusion>,
+    pub after: Option<tokio::sync::oneshot::Receiver<()>>,
+    pub done: tokio::sync::oneshot::Sender<()>,
+    /// The frame asked for the map to start over.
+    pub reset: bool,
+}
+
+/// A fusing stream's map, shared by its frames' jobs; dropping the last holder (the reader at
+/// the stream's end, or the last frame still computing) drops the map and takes it off the gauges.
+#[derive(Debug)]
+pub(crate) struct StreamFusion {
+    pub map: Arc<std::sync::Mutex<StreamMap>>,
+    pub bytes: AtomicUsize,
+    pub metrics: Metrics,
+}
+
+impl Drop for StreamFusion {
+    fn drop(&mut self) {
+        let bytes = self.bytes.load(Ordering::Relaxed);
+        self.metrics.fusion_bytes(-(bytes as f64));
+        self.metrics.fusion_maps(-1.0);
+    }
 }
 
 /// Shared by every handler of one server.
@@ -86,13 +117,15 @@ impl Dispatcher {
     /// `parts` is the conversion of the request (its error, if validation failed); `deadline` the
     /// caller's; `superseded` resolves to the sequence of a newer frame when this one may be
     /// skipped before it starts (never resolves under BLOCK). Dropping the returned future before
-    /// it finishes stops the frame unless its computation has already started.
+    /// it finishes stops the frame unless its computation has already started. With `fusion`,
+    /// the frame waits for its turn before a worker, and is computed from the stream's map.
     pub fn process(
         self: &Arc<Self>,
         rpc: &'static str,
         parts: Result<(Frame, FrameOptions), Error>,
         deadline: Option<Instant>,
         superseded: impl Future<Output = u64> + Send + 'static,
+        fusion: Option<FusionTurn>,
     ) -> impl Future<Output = Done> + Send + 'static {
         let received = Instant::now();
         // Admission happens now, in arrival order, not when the future is first polled.
@@ -115,7 +148,8 @@ impl Dispatcher {
             let done = match (parts, admitted) {
                 (Err(e), _) | (Ok(_), Err(e)) => Done::Failed(e),
                 (Ok((frame, options)), Ok(permit)) => {
-                    this.compute(frame, options, permit, received, deadline, superseded)
+                    let when = When { received, deadline };
+                    this.compute(frame, options, permit, when, superseded, fusion)
                         .await
                 }
             };
@@ -143,10 +177,11 @@ impl Dispatcher {
         frame: Frame,
         options: FrameOptions,
         admission: Option<tokio::sync::OwnedSemaphorePermit>,
-        received: Instant,
-        deadline: Option<Instant>,
+        when: When,
         superseded: impl Future<Output = u64>,
+        mut fusion: Option<FusionTurn>,
     ) -> Done {
+        let When { received, deadline } = when;
         let expired = async {
             match deadline {
                 Some(d) => tokio::time::sleep_until(tokio::time::Instant::from_std(d)).await,
@@ -154,13 +189,26 @@ impl Dispatcher {
             }
         };
         tokio::pin!(expired);
+        tokio::pin!(superseded);
+        // A fused frame waits for the previous one's fusion before it takes a worker, so that a
+        // stream never holds a worker while it waits for itself. A frame skipped or expired
+        // while it waits is not fused: fusing it needs its segmentation, the very work skipping
+        // saves, and its points without classes would add geometry no class vouches for.
+        if let Some(after) = fusion.as_mut().and_then(|f| f.after.take()) {
+            tokio::select! {
+                biased;
+                _ = after => {}
+                by = &mut superseded => return Done::Skipped { superseded_by: by },
+                () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
+            }
+        }
         let worker = tokio::select! {
             biased;
             permit = self.workers.clone().acquire_owned() => match permit {
                 Ok(p) => p,
                 Err(_) => return Done::Failed(Error::Internal("the worker pool is closed".into())),
             },
-            by = superseded => return Done::Skipped { superseded_by: by },
+            by = &mut superseded => return Done::Skipped { superseded_by: by },
             () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
         };
         if deadline.is_some_and(|d| Instant::now() >= d) {
@@ -175,7 +223,24 @@ impl Dispatcher {
         // caller goes away while the job runs.
         let job = tokio::task::spawn_blocking(move || {
             let _permits = (admission, worker);
-            run_pipeline(&frame, &options, &pipeline)
+            let Some(turn) = fusion else {
+                return run_pipeline(&frame, &options, &pipeline);
+            };
+            let FusionTurn {
+                stream,
+                done,
+                reset,
+                ..
+            } = turn;
+            let mut map = stream.map.lock().unwrap_or_else(|e| e.into_inner());
+            let out = run_fused(&frame, &options, &pipeline, &mut map, reset);
+            let bytes = map_bytes(&map);
+            drop(map);
+            let before = stream.bytes.swap(bytes, Ordering::Relaxed);
+            stream.metrics.fusion_bytes(bytes as f64 - before as f64);
+            // The next frame of the stream may fuse.
+            drop(done);
+            out
         });
         // A frame that outlives the caller's deadline is answered DEADLINE_EXCEEDED at once; its
         // computation cannot be interrupted and finishes in the background, keeping its permits.
@@ -199,6 +264,17 @@ impl Dispatcher {
             Err(join) => Done::Failed(Error::Internal(format!("pipeline worker failed: {join}"))),
         }
     }
+}
+
+/// When a frame arrived and when its caller gives up on it.
+struct When {
+    received: Instant,
+    deadline: Option<Instant>,
+}
+
+/// Bytes a stream's map holds: its cells and its kept obstacle rays.
+pub(crate) fn map_bytes(map: &StreamMap) -> usize {
+    map.cell_bytes() + map.keep_outs().map(|rays| rays.heap_bytes()).sum::<usize>()
 }
 
 /// Counts a frame as in flight while alive, also when its future is dropped mid-way.

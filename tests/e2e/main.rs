@@ -7,6 +7,7 @@ mod support;
 mod cli;
 mod detect;
 mod errors;
+mod fusion;
 mod health_reflection;
 mod overload;
 mod security;

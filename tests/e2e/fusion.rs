@@ -1,0 +1,162 @@
+//! Approach fusion over a real stream: answers come from the stream's map, equal to the
+//! in-process fused pipeline frame by frame; the map resets on request; bad options name their
+//! field; the defaults are reported.
+
+use landing_client::v1::{self, SegmentationMode};
+use landing_client::{FrameOutcome, StreamConfig, StreamItem};
+use landing_server::convert;
+use landing_server::pipeline::{StreamMap, run_fused};
+
+use crate::support::{TestServer, mode, scene, untimed};
+
+fn fusing(options: v1::PipelineOptions, fusion: v1::FusionOptions) -> StreamConfig {
+    StreamConfig {
+        options: Some(options),
+        max_in_flight: 4,
+        fusion: Some(fusion),
+        ..Default::default()
+    }
+}
+
+fn enabled() -> v1::FusionOptions {
+    v1::FusionOptions {
+        enabled: true,
+        ..Default::default()
+    }
+}
+
+/// Streams `frames` with `config`, asking for a reset before frame index `reset_at`.
+async fn stream(
+    server: &TestServer,
+    frames: Vec<v1::Frame>,
+    config: StreamConfig,
+    reset_at: Option<usize>,
+) -> Vec<StreamItem> {
+    let client = server.client().await;
+    let (mut tx, mut rx) = client.open_stream(config);
+    let sender = tokio::spawn(async move {
+        for (i, f) in frames.into_iter().enumerate() {
+            if Some(i) == reset_at {
+                tx.reset_fusion();
+            }
+            tx.send(f).await.expect("send a frame");
+        }
+    });
+    let mut items = Vec::new();
+    while let Some(item) = rx.next().await {
+        items.push(item.expect("stream answer"));
+    }
+    sender.await.expect("sender task");
+    items
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fused_answers_equal_the_in_process_fused_pipeline() {
+    let server = TestServer::start().await;
+    let frames: Vec<v1::Frame> = scene(31).frames.iter().map(|f| f.frame.clone()).collect();
+    let options = mode(SegmentationMode::PointClasses);
+    let items = stream(
+        &server,
+        frames.clone(),
+        fusing(options.clone(), enabled()),
+        None,
+    )
+    .await;
+    assert_eq!(items.len(), frames.len());
+
+    let defaults = landing_server::Config::default().fusion.params();
+    let mut map = StreamMap::new(defaults).unwrap();
+    let mut grew = false;
+    for (i, (item, frame)) in items.iter().zip(&frames).enumerate() {
+        assert_eq!(item.sequence, frame.sequence, "answers in order");
+        let FrameOutcome::Result(got) = &item.outcome else {
+            panic!("frame {i}: {:?}", item.outcome);
+        };
+        let request = v1::DetectLandingSitesRequest {
+            frame: Some(frame.clone()),
+            options: Some(options.clone()),
+        };
+        let (f, o) = convert::request_parts(&request, &server.reference().defaults).unwrap();
+        let want = run_fused(&f, &o, server.reference(), &mut map, false).unwrap();
+        assert_eq!(
+            untimed(got.clone()),
+            untimed(v1::FrameResult::from(&want)),
+            "frame {i}"
+        );
+        let fusion = got
+            .fusion
+            .as_ref()
+            .expect("a fused answer says what it fused");
+        assert_eq!(fusion.frames as usize, i + 1);
+        assert_eq!(fusion.points, got.point_count);
+        assert!(fusion.reset_reason.is_empty());
+        grew |= i > 0 && fusion.cells as usize > frame_points(frame);
+    }
+    assert!(grew, "the map holds more than one frame's points");
+    server.stop().await;
+}
+
+fn frame_points(frame: &v1::Frame) -> usize {
+    let cloud = frame.point_cloud.as_ref().unwrap();
+    cloud.data.len() / cloud.point_stride as usize
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_requested_reset_starts_the_map_over() {
+    let server = TestServer::start().await;
+    let frames: Vec<v1::Frame> = scene(32).frames.iter().map(|f| f.frame.clone()).collect();
+    assert!(frames.len() >= 4);
+    let config = fusing(mode(SegmentationMode::None), enabled());
+    let items = stream(&server, frames, config, Some(2)).await;
+    let fused: Vec<&v1::FusionSummary> = items
+        .iter()
+        .map(|i| i.outcome.result().and_then(|r| r.fusion.as_ref()).unwrap())
+        .collect();
+    let counts: Vec<u32> = fused.iter().map(|f| f.frames).collect();
+    assert_eq!(&counts[..4], &[1, 2, 1, 2], "{counts:?}");
+    assert_eq!(fused[2].reset_reason, "reset requested");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
+    let server = TestServer::start().await;
+    let frames: Vec<v1::Frame> = scene(33)
+        .frames
+        .iter()
+        .take(2)
+        .map(|f| f.frame.clone())
+        .collect();
+    let bad = v1::FusionOptions {
+        enabled: true,
+        cell_size_m: Some(-1.0),
+        ..Default::default()
+    };
+    let items = stream(
+        &server,
+        frames,
+        fusing(mode(SegmentationMode::None), bad),
+        None,
+    )
+    .await;
+    assert_eq!(items.len(), 2, "every frame is answered");
+    for item in &items {
+        let FrameOutcome::Error(e) = &item.outcome else {
+            panic!("{:?}", item.outcome);
+        };
+        assert_eq!(e.code, tonic::Code::InvalidArgument);
+        assert!(
+            e.field_violations
+                .iter()
+                .any(|v| v.field == "fusion.cell_size_m"),
+            "{e:?}"
+        );
+    }
+    let info = server.client().await.info().await.unwrap();
+    let defaults = info.default_fusion.expect("default_fusion");
+    assert!(!defaults.enabled);
+    let configured = landing_server::Config::default().fusion;
+    assert_eq!(defaults.cell_size_m, Some(configured.cell_size_m));
+    assert_eq!(defaults.max_cells, Some(configured.max_cells));
+    server.stop().await;
+}
