@@ -433,10 +433,7 @@ impl FrameSender {
         }
         permit.forget();
         let (overflow_policy, fusion) = if self.first {
-            (
-                self.config.overflow_policy as i32,
-                self.config.fusion.clone(),
-            )
+            (self.config.overflow_policy as i32, self.config.fusion)
         } else {
             (0, None)
         };

@@ -79,7 +79,10 @@ impl Default for FusionParams {
             cell_m: 0.15,
             horizon_s: 30.0,
             max_cells: 250_000,
-            keep_out_frames: 8,
+            // Measured on a fresh approach set (EVALUATION.md, "Approach fusion"): each older
+            // frame's footprints, cast from farther away, shrink the safe circles more than they
+            // catch misses, so by default only the current frame's count.
+            keep_out_frames: 1,
             keep_out_interval_s: 0.5,
             max_jump_m: 15.0,
             obstacle_weight: 4,

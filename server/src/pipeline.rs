@@ -201,9 +201,8 @@ pub fn run_pipeline(
 }
 
 /// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
-/// stream's `map`, and the answer is computed from the map's points inside the frame's scan
-/// footprint (the x/y bounds of its points), keeping clear of the keep-out footprints of every
-/// frame the map remembers. `reset` starts the map over first. A frame without a timestamp
+/// stream's `map`, and the answer is computed from all the map's points (what the approach has
+/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers. `reset` starts the map over first. A frame without a timestamp
 /// counts as taken at the previous frame's time.
 pub fn run_fused(
     frame: &Frame,
@@ -230,15 +229,12 @@ pub fn run_fused(
         keep_out: c.obstacles.take(),
         reset,
     });
-    let mut bounds = [[f64::INFINITY; 2], [f64::NEG_INFINITY; 2]];
-    for p in &points {
-        for k in 0..2 {
-            bounds[0][k] = bounds[0][k].min(p[k]);
-            bounds[1][k] = bounds[1][k].max(p[k]);
-        }
-    }
     let landable = &options.params.landable_classes;
-    let fused = map.fused(bounds, |class| landable.contains(&class));
+    // The answer covers everything the map holds: what the approach has scanned of the roof
+    // (and around it) within the horizon, not only the current scan's footprint, which shrinks
+    // as the drone descends.
+    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+    let fused = map.fused(everything, |class| landable.contains(&class));
     let world: Vec<[f32; 3]> = fused.points.iter().map(|p| p.map(|v| v as f32)).collect();
     let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
     let summary = FusionSummary {
