@@ -3,11 +3,11 @@
 //! field; the defaults are reported.
 
 use landing_client::v1::{self, SegmentationMode};
-use landing_client::{FrameOutcome, StreamConfig, StreamItem};
+use landing_client::{FrameOutcome, StreamConfig};
 use landing_server::convert;
 use landing_server::pipeline::{StreamMap, run_fused};
 
-use crate::support::{TestServer, mode, scene, untimed};
+use crate::support::{TestServer, mode, scene, stream_with, untimed};
 
 fn fusing(options: v1::PipelineOptions, fusion: v1::FusionOptions) -> StreamConfig {
     StreamConfig {
@@ -25,37 +25,12 @@ fn enabled() -> v1::FusionOptions {
     }
 }
 
-/// Streams `frames` with `config`, asking for a reset before frame index `reset_at`.
-async fn stream(
-    server: &TestServer,
-    frames: Vec<v1::Frame>,
-    config: StreamConfig,
-    reset_at: Option<usize>,
-) -> Vec<StreamItem> {
-    let client = server.client().await;
-    let (mut tx, mut rx) = client.open_stream(config);
-    let sender = tokio::spawn(async move {
-        for (i, f) in frames.into_iter().enumerate() {
-            if Some(i) == reset_at {
-                tx.reset_fusion();
-            }
-            tx.send(f).await.expect("send a frame");
-        }
-    });
-    let mut items = Vec::new();
-    while let Some(item) = rx.next().await {
-        items.push(item.expect("stream answer"));
-    }
-    sender.await.expect("sender task");
-    items
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fused_answers_equal_the_in_process_fused_pipeline() {
     let server = TestServer::start().await;
     let frames: Vec<v1::Frame> = scene(31).frames.iter().map(|f| f.frame.clone()).collect();
     let options = mode(SegmentationMode::PointClasses);
-    let items = stream(
+    let items = stream_with(
         &server,
         frames.clone(),
         fusing(options.clone(), enabled()),
@@ -107,7 +82,7 @@ async fn a_requested_reset_starts_the_map_over() {
     let frames: Vec<v1::Frame> = scene(32).frames.iter().map(|f| f.frame.clone()).collect();
     assert!(frames.len() >= 4);
     let config = fusing(mode(SegmentationMode::None), enabled());
-    let items = stream(&server, frames, config, Some(2)).await;
+    let items = stream_with(&server, frames, config, Some(2)).await;
     let fused: Vec<&v1::FusionSummary> = items
         .iter()
         .map(|i| i.outcome.result().and_then(|r| r.fusion.as_ref()).unwrap())
@@ -132,7 +107,7 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
         cell_size_m: Some(-1.0),
         ..Default::default()
     };
-    let items = stream(
+    let items = stream_with(
         &server,
         frames,
         fusing(mode(SegmentationMode::None), bad),

@@ -256,14 +256,29 @@ pub async fn stream_all(
     frames: Vec<v1::Frame>,
     options: PipelineOptions,
 ) -> Vec<StreamItem> {
-    let client = server.client().await;
-    let (mut tx, mut rx) = client.open_stream(StreamConfig {
+    let config = StreamConfig {
         options: Some(options),
         max_in_flight: 4,
         ..Default::default()
-    });
+    };
+    stream_with(server, frames, config, None).await
+}
+
+/// Streams `frames` with `config`, asking for a fusion reset before frame index `reset_at`, and
+/// collects every answer; panics if the stream breaks.
+pub async fn stream_with(
+    server: &TestServer,
+    frames: Vec<v1::Frame>,
+    config: StreamConfig,
+    reset_at: Option<usize>,
+) -> Vec<StreamItem> {
+    let client = server.client().await;
+    let (mut tx, mut rx) = client.open_stream(config);
     let sender = tokio::spawn(async move {
-        for f in frames {
+        for (i, f) in frames.into_iter().enumerate() {
+            if Some(i) == reset_at {
+                tx.reset_fusion();
+            }
             tx.send(f).await.expect("send a frame");
         }
     });
