@@ -93,63 +93,58 @@ impl Default for FusionParams {
 impl FusionParams {
     /// Checks every field; the error names the first one out of range.
     pub fn validate(&self) -> Result<(), FusionError> {
-        let bad = |field: &'static str, value: String, reason: &'static str| {
-            Err(FusionError::InvalidParam {
+        let checks = [
+            (
+                "cell_size_m",
+                (0.02..=5.0).contains(&self.cell_m),
+                self.cell_m.to_string(),
+                "must be in [0.02, 5]",
+            ),
+            (
+                "horizon_s",
+                self.horizon_s > 0.0 && self.horizon_s <= 3600.0,
+                self.horizon_s.to_string(),
+                "must be in (0, 3600]",
+            ),
+            (
+                "max_cells",
+                (1_000..=5_000_000).contains(&self.max_cells),
+                self.max_cells.to_string(),
+                "must be in [1000, 5000000]",
+            ),
+            (
+                "keep_out_frames",
+                (1..=64).contains(&self.keep_out_frames),
+                self.keep_out_frames.to_string(),
+                "must be in [1, 64]",
+            ),
+            (
+                "keep_out_interval_s",
+                self.keep_out_interval_s >= 0.0 && self.keep_out_interval_s.is_finite(),
+                self.keep_out_interval_s.to_string(),
+                "must be finite and >= 0",
+            ),
+            (
+                "max_jump_m",
+                self.max_jump_m > 0.0 && self.max_jump_m.is_finite(),
+                self.max_jump_m.to_string(),
+                "must be positive and finite",
+            ),
+            (
+                "obstacle_weight",
+                (1..=1000).contains(&self.obstacle_weight),
+                self.obstacle_weight.to_string(),
+                "must be in [1, 1000]",
+            ),
+        ];
+        match checks.into_iter().find(|c| !c.1) {
+            Some((field, _, value, reason)) => Err(FusionError::InvalidParam {
                 field,
                 value,
                 reason,
-            })
-        };
-        if !(self.cell_m >= 0.02 && self.cell_m <= 5.0) {
-            return bad(
-                "cell_size_m",
-                self.cell_m.to_string(),
-                "must be in [0.02, 5]",
-            );
+            }),
+            None => Ok(()),
         }
-        if !(self.horizon_s > 0.0 && self.horizon_s <= 3600.0) {
-            return bad(
-                "horizon_s",
-                self.horizon_s.to_string(),
-                "must be in (0, 3600]",
-            );
-        }
-        if !(1_000..=5_000_000).contains(&self.max_cells) {
-            return bad(
-                "max_cells",
-                self.max_cells.to_string(),
-                "must be in [1000, 5000000]",
-            );
-        }
-        if !(1..=64).contains(&self.keep_out_frames) {
-            return bad(
-                "keep_out_frames",
-                self.keep_out_frames.to_string(),
-                "must be in [1, 64]",
-            );
-        }
-        if !(self.keep_out_interval_s >= 0.0 && self.keep_out_interval_s.is_finite()) {
-            return bad(
-                "keep_out_interval_s",
-                self.keep_out_interval_s.to_string(),
-                "must be finite and >= 0",
-            );
-        }
-        if !(self.max_jump_m > 0.0 && self.max_jump_m.is_finite()) {
-            return bad(
-                "max_jump_m",
-                self.max_jump_m.to_string(),
-                "must be positive and finite",
-            );
-        }
-        if !(1..=1000).contains(&self.obstacle_weight) {
-            return bad(
-                "obstacle_weight",
-                self.obstacle_weight.to_string(),
-                "must be in [1, 1000]",
-            );
-        }
-        Ok(())
     }
 }
 
@@ -164,6 +159,15 @@ pub enum FusionError {
         value: String,
         reason: &'static str,
     },
+}
+
+impl FusionError {
+    /// The parameter at fault, named as in `landing.v1.FusionOptions` and the `[fusion]` config.
+    pub fn field(&self) -> &'static str {
+        match self {
+            Self::InvalidParam { field, .. } => field,
+        }
+    }
 }
 
 /// One frame's scan, in the world frame.
@@ -345,33 +349,33 @@ impl<K> FusionMap<K> {
             return Fused::default();
         };
         let c = self.params.cell_m;
-        let mut keys: Vec<&[i32; 3]> = self
+        let inside = |p: &[f64; 3]| {
+            p[0] >= bounds[0][0]
+                && p[0] <= bounds[1][0]
+                && p[1] >= bounds[0][1]
+                && p[1] <= bounds[1][1]
+        };
+        let mut kept: Vec<(&[i32; 3], [f64; 3], &Cell)> = self
             .cells
             .iter()
-            .filter(|(key, cell)| {
-                let x = origin[0] + (f64::from(key[0]) + f64::from(cell.mean[0])) * c;
-                let y = origin[1] + (f64::from(key[1]) + f64::from(cell.mean[1])) * c;
-                x >= bounds[0][0] && x <= bounds[1][0] && y >= bounds[0][1] && y <= bounds[1][1]
+            .map(|(key, cell)| {
+                let p = std::array::from_fn(|i| {
+                    origin[i] + (f64::from(key[i]) + f64::from(cell.mean[i])) * c
+                });
+                (key, p, cell)
             })
-            .map(|(key, _)| key)
+            .filter(|(_, p, _)| inside(p))
             .collect();
-        keys.sort_unstable();
+        kept.sort_unstable_by_key(|(key, _, _)| *key);
         let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
         let weight = self.params.obstacle_weight;
-        let mut points = Vec::with_capacity(keys.len());
-        let mut classes = Vec::with_capacity(if self.classified { keys.len() } else { 0 });
-        for key in keys {
-            let cell = &self.cells[key];
-            points.push(std::array::from_fn(|i| {
-                origin[i] + (f64::from(key[i]) + f64::from(cell.mean[i])) * c
-            }));
-            if self.classified {
-                classes.push(decide(&cell.votes, &landable, weight));
-            }
-        }
         Fused {
-            points,
-            classes: self.classified.then_some(classes),
+            points: kept.iter().map(|(_, p, _)| *p).collect(),
+            classes: self.classified.then(|| {
+                kept.iter()
+                    .map(|(_, _, cell)| decide(&cell.votes, &landable, weight))
+                    .collect()
+            }),
         }
     }
 
@@ -512,22 +516,13 @@ impl<K> FusionMap<K> {
             self.cells.retain(|_, cell| now_s - cell.seen_s <= horizon);
         }
         if self.cells.len() > self.params.max_cells {
+            // The cells seen longest ago go first.
             let excess = self.cells.len() - self.params.max_cells;
-            let mut seen: Vec<f32> = self.cells.values().map(|c| c.seen_s).collect();
-            let (_, cutoff, _) = seen.select_nth_unstable_by(excess, f32::total_cmp);
-            let cutoff = *cutoff;
-            // Older than the cut-off first, then as many seen at it as are needed.
-            self.cells.retain(|_, c| c.seen_s >= cutoff);
-            let mut over = self.cells.len().saturating_sub(self.params.max_cells);
-            if over > 0 {
-                self.cells.retain(|_, c| {
-                    if over > 0 && c.seen_s == cutoff {
-                        over -= 1;
-                        false
-                    } else {
-                        true
-                    }
-                });
+            let mut by_age: Vec<([i32; 3], f32)> =
+                self.cells.iter().map(|(k, c)| (*k, c.seen_s)).collect();
+            by_age.select_nth_unstable_by(excess - 1, |a, b| a.1.total_cmp(&b.1));
+            for (key, _) in &by_age[..excess] {
+                self.cells.remove(key);
             }
         }
     }

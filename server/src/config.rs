@@ -375,19 +375,11 @@ impl Config {
                 require_file(key, path)?;
             }
         }
-        match self.fusion.params().validate() {
-            Ok(()) => {}
-            Err(landing_fusion::FusionError::InvalidParam {
-                field,
-                value,
-                reason,
-            }) => {
-                return Err(Error::config(
-                    format!("fusion.{field}"),
-                    format!("{value}: {reason}"),
-                ));
-            }
-            Err(e) => return Err(Error::config("fusion", e.to_string())),
+        if let Err(e) = self.fusion.params().validate() {
+            return Err(Error::config(
+                format!("fusion.{}", e.field()),
+                e.to_string(),
+            ));
         }
         if !matches!(self.log.format.as_str(), "pretty" | "json") {
             return Err(Error::config(

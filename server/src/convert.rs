@@ -11,7 +11,7 @@ use nalgebra::Isometry3;
 use crate::geodetic::Geodetic;
 use crate::pipeline::{
     CameraImage, Cloud, Frame, FrameOptions, FrameOutput, ImagePixels, Intrinsics,
-    SegmentationMode, Site, StageTimings, pose,
+    SegmentationMode, Site, StageTimings, StreamMap, pose,
 };
 use crate::{Error, FieldViolation};
 
@@ -733,20 +733,13 @@ impl From<SegmentationMode> for v1::SegmentationMode {
     }
 }
 
-/// The map parameters a stream asks for: `defaults` (the server's `[fusion]`) where a field is
-/// unset; never more cells than the defaults allow. Errors name the field
-/// (`fusion.cell_size_m`).
-pub fn fusion_params(
+/// The map a fusing stream asks for: `defaults` (the server's `[fusion]`) where a field is unset;
+/// never more cells than the defaults allow. Errors name the field (`fusion.cell_size_m`).
+pub fn fusion_map(
     asked: &v1::FusionOptions,
     defaults: &landing_fusion::FusionParams,
-) -> Result<landing_fusion::FusionParams, Error> {
+) -> Result<StreamMap, Error> {
     let mut p = *defaults;
-    if let Some(v) = asked.cell_size_m {
-        p.cell_m = v;
-    }
-    if let Some(v) = asked.horizon_s {
-        p.horizon_s = v;
-    }
     if let Some(v) = asked.max_cells {
         if v as usize > defaults.max_cells {
             return Err(Error::invalid(
@@ -756,24 +749,13 @@ pub fn fusion_params(
         }
         p.max_cells = v as usize;
     }
-    if let Some(v) = asked.keep_out_frames {
-        p.keep_out_frames = v as usize;
-    }
-    if let Some(v) = asked.max_jump_m {
-        p.max_jump_m = v;
-    }
-    match p.validate() {
-        Ok(()) => Ok(p),
-        Err(landing_fusion::FusionError::InvalidParam {
-            field,
-            value,
-            reason,
-        }) => Err(Error::invalid(
-            format!("fusion.{field}"),
-            format!("{value}: {reason}"),
-        )),
-        Err(e) => Err(Error::invalid("fusion", e.to_string())),
-    }
+    p.cell_m = asked.cell_size_m.unwrap_or(p.cell_m);
+    p.horizon_s = asked.horizon_s.unwrap_or(p.horizon_s);
+    p.keep_out_frames = asked
+        .keep_out_frames
+        .map_or(p.keep_out_frames, |v| v as usize);
+    p.max_jump_m = asked.max_jump_m.unwrap_or(p.max_jump_m);
+    StreamMap::new(p).map_err(|e| Error::invalid(format!("fusion.{}", e.field()), e.to_string()))
 }
 
 /// The server's fusion defaults as the proto reports them (`ServiceInfo.default_fusion`).

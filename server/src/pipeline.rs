@@ -190,7 +190,7 @@ pub fn run_pipeline(
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
-    let c = classify(frame, options, pipeline)?;
+    let c = classify(frame, to_world(&frame.cloud), options, pipeline)?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
         world: &c.world,
@@ -202,8 +202,9 @@ pub fn run_pipeline(
 
 /// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
 /// stream's `map`, and the answer is computed from all the map's points (what the approach has
-/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers. `reset` starts the map over first. A frame without a timestamp
-/// counts as taken at the previous frame's time.
+/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers.
+/// `reset` starts the map over first. A frame without a timestamp counts as taken at the
+/// previous frame's time.
 pub fn run_fused(
     frame: &Frame,
     options: &FrameOptions,
@@ -212,8 +213,10 @@ pub fn run_fused(
     reset: bool,
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
-    let mut c = classify(frame, options, pipeline)?;
+    // The map bins in double precision; classification takes the same points as `to_world` gives.
     let points = to_world_f64(&frame.cloud);
+    let world = points.iter().map(|p| p.map(|v| v as f32)).collect();
+    let mut c = classify(frame, world, options, pipeline)?;
     let time_s = frame
         .timestamp
         .map(|t| t.seconds as f64 + f64::from(t.nanos) * 1e-9)
@@ -265,16 +268,17 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points per the mode.
+/// Decodes the frame's images and classifies its points (`world`: the cloud in the world frame)
+/// per the mode.
 fn classify(
     frame: &Frame,
+    world: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
 ) -> Result<Classified, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
 
-    let world = to_world(&frame.cloud);
     // Every image is decoded, so that a bad one is reported whatever the mode.
     let decode_start = Instant::now();
     let decoded = match &frame.image {

@@ -12,9 +12,16 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::auth::Arrived;
 use crate::convert;
-use crate::pipeline::StreamMap;
 use crate::status::{to_rpc_status, to_status};
 use crate::workers::{Dispatcher, Done, FusionTurn, StreamFusion};
+
+/// Whether a stream fuses, as its first message asked.
+enum Fusing {
+    Off,
+    On(Arc<StreamFusion>),
+    /// It asked with options this server refuses; every frame is answered with the error.
+    Refused(crate::Error),
+}
 
 /// The service state shared by every call.
 #[derive(Debug, Clone)]
@@ -131,7 +138,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         tokio::spawn(async move {
             let dispatcher = reader_dispatcher;
             let mut latest_policy = None;
-            let mut fusion_policy: Option<Option<Result<Arc<StreamFusion>, crate::Error>>> = None;
+            let mut fusing = None;
             // The previous fused frame's signal: the next one fuses after it.
             let mut previous = None;
             let mut index = 0u64;
@@ -163,36 +170,34 @@ impl v1::landing_service_server::LandingService for LandingService {
                 index += 1;
                 latest_tx.send_replace((index, sequence));
                 // The first message decides whether the stream fuses, and with what map.
-                let fusion = fusion_policy.get_or_insert_with(|| {
-                    let asked = request.fusion.as_ref().filter(|f| f.enabled)?;
-                    Some(
-                        convert::fusion_params(asked, &fusion_defaults).and_then(|params| {
-                            let map = StreamMap::new(params)
-                                .map_err(|e| crate::Error::invalid("fusion", e.to_string()))?;
-                            dispatcher.metrics.fusion_maps(1.0);
-                            Ok(Arc::new(StreamFusion {
-                                map: Arc::new(std::sync::Mutex::new(map)),
-                                bytes: Default::default(),
-                                metrics: dispatcher.metrics.clone(),
-                            }))
-                        }),
-                    )
+                let fusing = fusing.get_or_insert_with(|| match &request.fusion {
+                    Some(asked) if asked.enabled => {
+                        match convert::fusion_map(asked, &fusion_defaults) {
+                            Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
+                            Err(e) => Fusing::Refused(e),
+                        }
+                    }
+                    _ => Fusing::Off,
                 });
-                let parts = match fusion {
-                    Some(Err(e)) => Err(e.clone()),
-                    _ => convert::stream_parts(&request, &dispatcher.pipeline.defaults),
-                };
-                let turn = match fusion {
-                    Some(Ok(stream)) => {
+                let (parts, turn) = match fusing {
+                    Fusing::Off => (
+                        convert::stream_parts(&request, &dispatcher.pipeline.defaults),
+                        None,
+                    ),
+                    Fusing::Refused(e) => (Err(e.clone()), None),
+                    Fusing::On(stream) => {
                         let (done, next) = tokio::sync::oneshot::channel();
-                        Some(FusionTurn {
+                        let turn = FusionTurn {
                             stream: stream.clone(),
                             after: previous.replace(next),
                             done,
                             reset: request.reset_fusion,
-                        })
+                        };
+                        (
+                            convert::stream_parts(&request, &dispatcher.pipeline.defaults),
+                            Some(turn),
+                        )
                     }
-                    _ => None,
                 };
                 drop(request);
                 let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =

@@ -39,13 +39,26 @@ pub(crate) struct FusionTurn {
     pub reset: bool,
 }
 
-/// A fusing stream's map, shared by its frames' jobs; dropping the last holder (the reader at
-/// the stream's end, or the last frame still computing) drops the map and takes it off the gauges.
+/// A fusing stream's map, shared by its frames' jobs: on the gauges from [`StreamFusion::open`]
+/// until the last holder (the reader at the stream's end, or the last frame still computing)
+/// drops it.
 #[derive(Debug)]
 pub(crate) struct StreamFusion {
-    pub map: Arc<std::sync::Mutex<StreamMap>>,
-    pub bytes: AtomicUsize,
-    pub metrics: Metrics,
+    map: std::sync::Mutex<StreamMap>,
+    /// What the map held after its latest frame, as counted on the memory gauge.
+    bytes: AtomicUsize,
+    metrics: Metrics,
+}
+
+impl StreamFusion {
+    pub fn open(map: StreamMap, metrics: &Metrics) -> Arc<Self> {
+        metrics.fusion_maps(1.0);
+        Arc::new(Self {
+            map: std::sync::Mutex::new(map),
+            bytes: AtomicUsize::new(0),
+            metrics: metrics.clone(),
+        })
+    }
 }
 
 impl Drop for StreamFusion {
