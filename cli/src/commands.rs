@@ -19,8 +19,8 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use landing_proto::v1::{
-    Frame, FrameResult, LandingSite, OverflowPolicy, PipelineOptions, SegmentationMode,
-    ServiceInfo, StreamLandingSitesResponse, stream_landing_sites_response,
+    Frame, FrameResult, FusionOptions, LandingSite, OverflowPolicy, PipelineOptions,
+    SegmentationMode, ServiceInfo, StreamLandingSitesResponse, stream_landing_sites_response,
 };
 use serde_json::{Value, json};
 
@@ -167,6 +167,10 @@ pub struct ReplayArgs {
     /// Frames in flight at once.
     #[arg(long, default_value_t = 4)]
     pub window: usize,
+    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
+    /// (with the server's `[fusion]` defaults).
+    #[arg(long)]
+    pub fuse: bool,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
 }
@@ -178,6 +182,14 @@ pub enum Overflow {
     Block,
     /// Keep only the newest queued frame; older ones are skipped.
     Latest,
+}
+
+/// The fusion a `--fuse` flag asks for: on, with the server's defaults.
+fn fusion_options(fuse: bool) -> Option<FusionOptions> {
+    fuse.then(|| FusionOptions {
+        enabled: true,
+        ..FusionOptions::default()
+    })
 }
 
 impl Overflow {
@@ -210,6 +222,10 @@ pub struct LoadtestArgs {
     /// What the server does when frames arrive faster than it works.
     #[arg(long, value_enum, default_value_t = Overflow::Block)]
     pub overflow: Overflow,
+    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
+    /// (with the server's `[fusion]` defaults).
+    #[arg(long)]
+    pub fuse: bool,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
 }
@@ -394,7 +410,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         overflow_policy: a.overflow.policy(),
         options: Some(a.pipeline.options()),
         max_in_flight: a.window.max(1),
-        fusion: None,
+        fusion: fusion_options(a.fuse),
     };
     let summary = replay_frames(&client, &frames, config, a.rate, |rec, item| {
         if cli.json {
@@ -536,7 +552,7 @@ async fn loadtest(
             overflow_policy: a.overflow.policy(),
             options: Some(a.pipeline.options()),
             max_in_flight: a.window.max(1),
-            fusion: None,
+            fusion: fusion_options(a.fuse),
         },
     };
     let show = std::io::stderr().is_terminal();
@@ -763,9 +779,17 @@ fn print_item_row(item: &StreamItem, out: &mut (dyn Write + Send)) -> std::io::R
     let ms = item.latency.as_secs_f64() * 1e3;
     match &item.outcome {
         FrameOutcome::Result(r) => {
+            let fused = r.fusion.as_ref().map_or(String::new(), |f| {
+                let reset = if f.reset_reason.is_empty() {
+                    String::new()
+                } else {
+                    format!(", map reset: {}", f.reset_reason)
+                };
+                format!("  fused {} frame(s), {} points{reset}", f.frames, f.points)
+            });
             writeln!(
                 out,
-                "frame {:>5}  ok       {:>2} site(s)  {:>7.1} ms",
+                "frame {:>5}  ok       {:>2} site(s)  {:>7.1} ms{fused}",
                 item.sequence,
                 r.sites.len(),
                 ms
@@ -834,11 +858,21 @@ pub fn result_json(r: &FrameResult) -> Value {
         "triangle_count": r.triangle_count,
         "timings_ms": {
             "queue": ms(t.queue), "decode": ms(t.decode), "segmentation": ms(t.segmentation),
-            "classification": ms(t.classification), "triangulation": ms(t.triangulation),
+            "classification": ms(t.classification), "fusion": ms(t.fusion), "triangulation": ms(t.triangulation),
             "triangle_filter": ms(t.triangle_filter), "plane_extraction": ms(t.plane_extraction),
             "polygon_extraction": ms(t.polygon_extraction), "polylabel": ms(t.polylabel), "total": ms(t.total),
         },
         "sites": r.sites.iter().map(site_json).collect::<Vec<_>>(),
+        "fusion": r.fusion.as_ref().map(|f| json!({
+            "frames": f.frames, "points": f.points, "cells": f.cells,
+            "reset_reason": (!f.reset_reason.is_empty()).then_some(&f.reset_reason),
+            "keep_out_frames": f.keep_out_frames,
+            "registration": f.registration.map(|r| json!({
+                "translation_m": r.translation_m, "rotation_deg": r.rotation_deg,
+                "matched_points": r.matched_points, "rms_before_m": r.rms_before_m, "rms_after_m": r.rms_after_m,
+            })),
+            "registration_skipped": (!f.registration_skipped.is_empty()).then_some(&f.registration_skipped),
+        })),
     })
 }
 

@@ -56,11 +56,12 @@ impl Mode {
 }
 
 /// The pipeline steps the server times, in pipeline order.
-pub const STEPS: [&str; 10] = [
+pub const STEPS: [&str; 11] = [
     "queue",
     "decode",
     "segmentation",
     "classification",
+    "fusion",
     "triangulation",
     "triangle_filter",
     "plane_extraction",

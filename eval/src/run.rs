@@ -145,6 +145,7 @@ pub fn step_times_ms(t: Option<&StageTimings>) -> Vec<Option<f64>> {
         ms(&t.decode),
         ms(&t.segmentation),
         ms(&t.classification),
+        ms(&t.fusion),
         ms(&t.triangulation),
         ms(&t.triangle_filter),
         ms(&t.plane_extraction),

@@ -4,13 +4,18 @@
 //! frame's polygons end at its own outermost points and one frame's segmentation miss can become
 //! an unsafe site. A [`FusionMap`] keeps, per stream and in world coordinates:
 //!
-//! - the scans' points, thinned to one mean point per cubic cell of [`FusionParams::cell_m`];
+//! - the scans' points, thinned to one mean point per cubic cell of [`FusionParams::cell_m`]
+//!   (answers take the top cell of each column: the surface seen from above);
 //! - per cell, the classes the frames that saw it gave it: one vote per frame (the majority
 //!   class of that frame's points in the cell), so a dense frame does not outvote a sparse one.
 //!   An obstacle vote outweighs [`FusionParams::obstacle_weight`] landable ones, so obstacle
 //!   evidence is not washed out by one contrary frame;
 //! - the keep-out footprints of recent frames' obstacle pixels (`K`, opaque here: the server
 //!   stores the camera's obstacle rays), spread over the approach.
+//!
+//! Before a scan is added, [`FusionMap::register`] finds the small rigid correction that lays it
+//! onto the map's planes (a drone's pose is off by centimetres and a tenth of a degree, enough
+//! to smear the map); the caller moves the scan and its poses by it.
 //!
 //! It is bounded in cells ([`FusionParams::max_cells`], the oldest forgotten first) and in time
 //! ([`FusionParams::horizon_s`]), and starts over ([`Reset`]) when the drone changes, the pose
@@ -44,8 +49,12 @@
 
 #![forbid(unsafe_code)]
 
+mod register;
+
 use std::collections::{HashMap, VecDeque};
-use std::hash::BuildHasherDefault;
+use std::hash::{BuildHasherDefault, Hasher};
+
+pub use register::{Correction, NotRegistered};
 
 /// Number of class ids a cell counts votes for (`landing.v1.SemanticClass` 0..=15).
 pub const CLASSES: usize = 16;
@@ -71,6 +80,8 @@ pub struct FusionParams {
     pub max_jump_m: f64,
     /// One obstacle vote outweighs this many landable votes.
     pub obstacle_weight: u32,
+    /// Whether [`FusionMap::register`] corrects scans (point-to-plane alignment to the map).
+    pub register: bool,
 }
 
 impl Default for FusionParams {
@@ -79,13 +90,15 @@ impl Default for FusionParams {
             cell_m: 0.15,
             horizon_s: 30.0,
             max_cells: 250_000,
-            // Measured on a fresh approach set (EVALUATION.md, "Approach fusion"): each older
-            // frame's footprints, cast from farther away, shrink the safe circles more than they
-            // catch misses, so by default only the current frame's count.
-            keep_out_frames: 1,
+            // Eight frames half a second apart cover a 4 s approach; where a much nearer frame
+            // sees a place, its view replaces the older ones' (the server casts them so), so
+            // older, coarser footprints cost the safe circles little (EVALUATION.md, "Approach
+            // fusion").
+            keep_out_frames: 8,
             keep_out_interval_s: 0.5,
             max_jump_m: 15.0,
             obstacle_weight: 4,
+            register: true,
         }
     }
 }
@@ -249,7 +262,7 @@ pub struct FusionMap<K> {
     /// World position of cell (0, 0, 0)'s corner: the first scan's sensor, so that cell
     /// coordinates stay small wherever the world origin is.
     origin: Option<[f64; 3]>,
-    cells: HashMap<[i32; 3], Cell, BuildHasherDefault<std::collections::hash_map::DefaultHasher>>,
+    cells: HashMap<[i32; 3], Cell, BuildHasherDefault<CellHasher>>,
     /// (time, footprints), oldest first; the last is the newest frame's.
     keep_out: VecDeque<(f64, K)>,
     drone_id: String,
@@ -260,6 +273,52 @@ pub struct FusionMap<K> {
     frames: u32,
     /// Whether any scan came with classes.
     classified: bool,
+}
+
+/// The hash of a cell key: its three coordinates mixed by multiplication (deterministic, so a
+/// map's iteration order depends only on what it was given, and several times cheaper than the
+/// standard SipHash on the lookups registration and fusion make per frame). A stream can only
+/// crowd its own map, which is bounded in cells.
+#[derive(Default)]
+struct CellHasher(u64);
+
+impl Hasher for CellHasher {
+    fn finish(&self) -> u64 {
+        // The final avalanche of MurmurHash3: every input bit reaches the high bits hashbrown
+        // takes its control bytes from.
+        let mut h = self.0;
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xff51_afd7_ed55_8ccd);
+        h ^= h >> 33;
+        h = h.wrapping_mul(0xc4ce_b9fe_1a85_ec53);
+        h ^ (h >> 33)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u8(b);
+        }
+    }
+
+    fn write_u8(&mut self, b: u8) {
+        self.write_u64(u64::from(b));
+    }
+
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+
+    fn write_i32(&mut self, v: i32) {
+        self.write_u32(v as u32);
+    }
+
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(21) ^ v).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
 }
 
 /// One cell: the mean of its points (relative to the map origin) and its votes.
@@ -314,11 +373,7 @@ impl<K> FusionMap<K> {
 
     /// Adds a scan; returns why the map started over first, if it did.
     pub fn insert(&mut self, scan: Scan<'_, K>) -> Option<Reset> {
-        let reset = if self.last.is_some() && scan.reset {
-            Some(Reset::Requested)
-        } else {
-            self.reset_reason(&scan)
-        };
+        let reset = self.would_reset(&scan);
         if reset.is_some() {
             self.clear();
         }
@@ -340,42 +395,55 @@ impl<K> FusionMap<K> {
         reset
     }
 
-    /// The map's points whose x/y lie inside `bounds` (`[min, max]`), with the class each cell's
-    /// votes decide: an obstacle (any class `is_landable` rejects, other than 0 = unknown) when
-    /// its votes times [`FusionParams::obstacle_weight`] reach the landable votes, else the most
-    /// voted landable class, else 0.
+    /// The map's top surface: of each column of cells (same x/y), the highest, whose x/y lie
+    /// inside `bounds` (`[min, max]`), with the class each cell's votes decide. What lies under
+    /// the top of a column (a wall below its roof edge, a roof under a water tank) cannot be
+    /// landed on, and the 2-D triangulation would only make slivers of it. Each cell's class is
+    /// an obstacle (any class `is_landable` rejects, other than 0 = unknown) when its votes
+    /// times [`FusionParams::obstacle_weight`] reach the landable votes, else the most voted
+    /// landable class, else 0.
     pub fn fused(&self, bounds: [[f64; 2]; 2], is_landable: impl Fn(u8) -> bool) -> Fused {
         let Some(origin) = self.origin else {
             return Fused::default();
         };
         let c = self.params.cell_m;
+        let position = |key: &[i32; 3], cell: &Cell| -> [f64; 3] {
+            std::array::from_fn(|i| origin[i] + (f64::from(key[i]) + f64::from(cell.mean[i])) * c)
+        };
         let inside = |p: &[f64; 3]| {
             p[0] >= bounds[0][0]
                 && p[0] <= bounds[1][0]
                 && p[1] >= bounds[0][1]
                 && p[1] <= bounds[1][1]
         };
-        let mut kept: Vec<(&[i32; 3], [f64; 3], &Cell)> = self
+        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
+        let weight = self.params.obstacle_weight;
+        // Everything an answer needs of a cell, read in the table's own (memory) order: sorting
+        // references instead would chase each one afterwards. Keys are packed into one integer
+        // in (x, y, z) order, one comparison per step of the sort.
+        let mut columns: Vec<(u128, [f64; 3], u8)> = self
             .cells
             .iter()
             .map(|(key, cell)| {
-                let p = std::array::from_fn(|i| {
-                    origin[i] + (f64::from(key[i]) + f64::from(cell.mean[i])) * c
-                });
-                (key, p, cell)
+                let class = decide(&cell.votes, &landable, weight);
+                (sort_key(key), position(key, cell), class)
             })
-            .filter(|(_, p, _)| inside(p))
             .collect();
-        kept.sort_unstable_by_key(|(key, _, _)| *key);
-        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
-        let weight = self.params.obstacle_weight;
+        columns.sort_unstable_by_key(|(key, _, _)| *key);
+        // Sorted by (x, y, z): the last cell of each column is its top.
+        columns.dedup_by(|upper, lower| {
+            let same_column = upper.0 >> 32 == lower.0 >> 32;
+            if same_column {
+                *lower = *upper;
+            }
+            same_column
+        });
+        columns.retain(|(_, p, _)| inside(p));
         Fused {
-            points: kept.iter().map(|(_, p, _)| *p).collect(),
-            classes: self.classified.then(|| {
-                kept.iter()
-                    .map(|(_, _, cell)| decide(&cell.votes, &landable, weight))
-                    .collect()
-            }),
+            points: columns.iter().map(|(_, p, _)| *p).collect(),
+            classes: self
+                .classified
+                .then(|| columns.iter().map(|(_, _, class)| *class).collect()),
         }
     }
 
@@ -405,8 +473,13 @@ impl<K> FusionMap<K> {
         self.cells.capacity() * (std::mem::size_of::<([i32; 3], Cell)>() + 1)
     }
 
-    fn reset_reason(&self, scan: &Scan<'_, K>) -> Option<Reset> {
+    /// Why [`FusionMap::insert`]ing `scan` would start the map over, if it would (only the
+    /// scan's drone, time, sensor and reset flag count).
+    pub fn would_reset(&self, scan: &Scan<'_, K>) -> Option<Reset> {
         let (time, sensor) = self.last?;
+        if scan.reset {
+            return Some(Reset::Requested);
+        }
         if scan.drone_id != self.drone_id {
             return Some(Reset::DroneChanged);
         }
@@ -526,6 +599,12 @@ impl<K> FusionMap<K> {
             }
         }
     }
+}
+
+/// A cell key as one unsigned integer ordered as the key is, x first.
+fn sort_key(key: &[i32; 3]) -> u128 {
+    let flip = |v: i32| u128::from((v as u32) ^ 0x8000_0000);
+    flip(key[0]) << 64 | flip(key[1]) << 32 | flip(key[2])
 }
 
 /// The class a cell's votes decide (see [`FusionMap::fused`]).

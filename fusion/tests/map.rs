@@ -148,6 +148,28 @@ fn each_reset_reason_starts_over() {
 }
 
 #[test]
+fn answers_are_the_top_surface_seen_from_above() {
+    // The roof, and a wall below its first row of points: 20 cells straight down.
+    let mut pts = roof([0.0; 3]);
+    let edge: Vec<[f64; 3]> = pts.iter().take(20).copied().collect();
+    for p in &edge {
+        for k in 1..=20 {
+            pts.push([p[0], p[1], p[2] - f64::from(k) * 0.15]);
+        }
+    }
+    let mut classes = vec![ROOFTOP; 400];
+    classes.resize(pts.len(), AC_UNIT);
+    let mut m = map();
+    m.insert(scan(0.0, &pts, &classes));
+    assert_eq!(m.cells(), pts.len());
+    let f = m.fused([[-100.0, -100.0], [100.0, 100.0]], landable);
+    // One point per column: the roof's, with the roof's class.
+    assert_eq!(f.points.len(), 400);
+    assert!(f.points.iter().all(|p| (p[2] - 30.037).abs() < 1e-4));
+    assert!(f.classes.unwrap().iter().all(|&c| c == ROOFTOP));
+}
+
+#[test]
 fn answers_hold_only_the_cells_inside_the_bounds() {
     let pts = roof([0.0; 3]);
     let classes = vec![ROOFTOP; pts.len()];

@@ -40,9 +40,15 @@ const CELL: usize = 8;
 /// At most this many disks per block and plane.
 const MAX_SWEEP_DISKS: usize = 64;
 
+/// A newer frame replaces an older one's view of a place only from at most this fraction of the
+/// older one's range to it (see [`ObstacleRays::newest_view_on_plane`]).
+pub const NEARER_VIEW: f64 = 0.8;
+
 /// The rays of a mask's obstacle pixels, in the world frame.
 #[derive(Debug, Clone)]
 pub struct ObstacleRays {
+    /// The camera the rays leave, for [`ObstacleRays::sees`].
+    camera: CameraModel,
     origin: Point3<f64>,
     /// Unit directions, world frame.
     rays: Vec<Vector3<f64>>,
@@ -127,6 +133,7 @@ impl ObstacleRays {
             }
         }
         Self {
+            camera: camera.clone(),
             origin: Point3::from(camera.pose.translation.vector),
             rays,
             tops,
@@ -163,6 +170,61 @@ impl ObstacleRays {
         normal: [f64; 3],
         bounds: [f64; 4],
     ) -> Vec<([f64; 2], f64)> {
+        let mut out = Vec::new();
+        self.cast(point, normal, bounds, |_| true, &mut out);
+        out
+    }
+
+    /// Whether `point` (world frame) is in front of this frame's camera and inside its image.
+    pub fn sees(&self, point: &Point3<f64>) -> bool {
+        let (w, h) = (f64::from(self.camera.width), f64::from(self.camera.height));
+        self.camera
+            .project(point)
+            .is_some_and(|(u, v)| (0.0..w).contains(&u) && (0.0..h).contains(&v))
+    }
+
+    /// The footprints of several frames' obstacle blocks on one plane (as
+    /// [`ObstacleRays::on_plane`]), `frames` oldest first, where a nearer view decides: a block of
+    /// an older frame counts unless a newer frame's camera sees the place its obstacle stands
+    /// (where its ray is the obstacle's height above the plane) from at most [`NEARER_VIEW`] of
+    /// the older camera's range. A much nearer view replaces what a far one saw (its pixels are
+    /// finer, and the far frame's false obstacles would shrink every circle); views from about
+    /// the same range add up, so one frame's miss is not the last word; and what has left the
+    /// newest camera's view is still kept clear of as the last cameras that saw it saw it.
+    pub fn newest_view_on_plane(
+        frames: &[&ObstacleRays],
+        point: [f64; 3],
+        normal: [f64; 3],
+        bounds: [f64; 4],
+    ) -> Vec<([f64; 2], f64)> {
+        let mut out = Vec::new();
+        for (i, rays) in frames.iter().enumerate() {
+            let newer = &frames[i + 1..];
+            rays.cast(
+                point,
+                normal,
+                bounds,
+                |base| {
+                    let range = (base - rays.origin).norm();
+                    !newer
+                        .iter()
+                        .any(|n| (base - n.origin).norm() <= NEARER_VIEW * range && n.sees(base))
+                },
+                &mut out,
+            );
+        }
+        out
+    }
+
+    /// [`ObstacleRays::on_plane`] for the blocks whose obstacle base `keep` accepts, into `out`.
+    fn cast(
+        &self,
+        point: [f64; 3],
+        normal: [f64; 3],
+        bounds: [f64; 4],
+        keep: impl Fn(&Point3<f64>) -> bool,
+        out: &mut Vec<([f64; 2], f64)>,
+    ) {
         let point = Point3::from(point);
         let mut n = Vector3::from(normal);
         // Heights are measured on the camera's side of the plane.
@@ -178,7 +240,6 @@ impl ObstacleRays {
                 && c.x - r <= bounds[2]
                 && c.y - r <= bounds[3]
         };
-        let mut out = Vec::new();
         for (ray, top) in self.rays.iter().zip(&self.tops) {
             // The ray descends towards the plane: cos of its incidence.
             let cos = -n.dot(ray);
@@ -207,6 +268,9 @@ impl ObstacleRays {
             {
                 continue;
             }
+            if !keep(&under) {
+                continue;
+            }
             let sweep = under - hit;
             let steps = ((sweep.norm() / radius).ceil() as usize).min(MAX_SWEEP_DISKS);
             for k in 0..=steps {
@@ -220,7 +284,6 @@ impl ObstacleRays {
                 }
             }
         }
-        out
     }
 }
 
@@ -228,6 +291,49 @@ impl ObstacleRays {
 mod tests {
     use super::*;
     use crate::camera::tests::nadir_camera_at;
+
+    #[test]
+    fn a_much_nearer_camera_that_sees_a_place_decides_it() {
+        let roof = (
+            [0.0, 0.0, 5.0],
+            [0.0, 0.0, 1.0],
+            [-100.0, -100.0, 100.0, 100.0],
+        );
+        let cast = |frames: &[&ObstacleRays]| {
+            ObstacleRays::newest_view_on_plane(frames, roof.0, roof.1, roof.2)
+        };
+        // From 20 m, one obstacle block; it lands near (1.65, 2.85) on the roof.
+        let mut data = vec![4u8; 100 * 80];
+        data[21 * 100 + 61] = 7;
+        let far = ObstacleRays::new(
+            &nadir_camera_at(20.0),
+            &ClassMask::new(100, 80, data).unwrap(),
+            &[],
+            |c| c != 4,
+        );
+        let clear = ClassMask::new(100, 80, vec![4u8; 100 * 80]).unwrap();
+        // From 15 m above the same place the roof is clear; from 30 m east it is out of view.
+        let near = ObstacleRays::new(&nadir_camera_at(15.0), &clear, &[], |c| c != 4);
+        let mut elsewhere = nadir_camera_at(15.0);
+        elsewhere.pose.translation.vector.x = 30.0;
+        let elsewhere = ObstacleRays::new(&elsewhere, &clear, &[], |c| c != 4);
+
+        let alone = far.on_plane(roof.0, roof.1, roof.2);
+        assert!(!alone.is_empty());
+        assert_eq!(cast(&[&far]), alone);
+        // A newer view of the same place replaces it; a newer view elsewhere does not.
+        assert!(cast(&[&far, &near]).is_empty());
+        assert_eq!(cast(&[&far, &elsewhere]), alone);
+        // Order is time: the far frame as the newest keeps its block.
+        assert_eq!(cast(&[&near, &far]), alone);
+        // A newer view from about the same range adds to the older one instead of replacing it.
+        let mut beside = nadir_camera_at(20.0);
+        beside.pose.translation.vector.x = 0.5;
+        let beside = ObstacleRays::new(&beside, &clear, &[], |c| c != 4);
+        assert_eq!(cast(&[&far, &beside]), alone);
+        let under = Point3::new(1.65, 2.85, 5.0);
+        assert!(near.sees(&under) && !elsewhere.sees(&under));
+    }
 
     #[test]
     fn obstacle_pixels_land_where_the_camera_sees_them() {

@@ -41,6 +41,8 @@ pub struct FusionConfig {
     pub max_jump_m: f64,
     /// One obstacle vote outweighs this many landable votes.
     pub obstacle_weight: u32,
+    /// Lay each scan onto the map before fusing it (point-to-plane registration).
+    pub register_scans: bool,
 }
 
 impl Default for FusionConfig {
@@ -54,6 +56,7 @@ impl Default for FusionConfig {
             keep_out_interval_s: p.keep_out_interval_s,
             max_jump_m: p.max_jump_m,
             obstacle_weight: p.obstacle_weight,
+            register_scans: p.register,
         }
     }
 }
@@ -69,6 +72,7 @@ impl FusionConfig {
             keep_out_interval_s: self.keep_out_interval_s,
             max_jump_m: self.max_jump_m,
             obstacle_weight: self.obstacle_weight,
+            register: self.register_scans,
         }
     }
 }

@@ -755,6 +755,7 @@ pub fn fusion_map(
         .keep_out_frames
         .map_or(p.keep_out_frames, |v| v as usize);
     p.max_jump_m = asked.max_jump_m.unwrap_or(p.max_jump_m);
+    p.register = asked.register_scans.unwrap_or(p.register);
     StreamMap::new(p).map_err(|e| Error::invalid(format!("fusion.{}", e.field()), e.to_string()))
 }
 
@@ -767,6 +768,7 @@ pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
         max_cells: Some(u32::try_from(p.max_cells).unwrap_or(u32::MAX)),
         keep_out_frames: Some(u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX)),
         max_jump_m: Some(p.max_jump_m),
+        register_scans: Some(p.register),
     }
 }
 
@@ -816,6 +818,7 @@ impl From<&StageTimings> for v1::StageTimings {
             decode: duration(t.decode),
             segmentation: duration(t.segmentation),
             classification: duration(t.classification),
+            fusion: duration(t.fusion),
             triangulation: duration(t.triangulation),
             triangle_filter: duration(t.triangle_filter),
             plane_extraction: duration(t.plane_extraction),
@@ -867,6 +870,19 @@ impl From<&FrameOutput> for v1::FrameResult {
                 cells: count(f.cells),
                 reset_reason: f.reset.clone().unwrap_or_default(),
                 keep_out_frames: count(f.keep_out_frames),
+                registration: f.registration.as_ref().ok().map(|c| v1::Registration {
+                    translation_m: c.translation_m(),
+                    rotation_deg: c.rotation_deg(),
+                    matched_points: count(c.matched),
+                    rms_before_m: c.rms_before_m,
+                    rms_after_m: c.rms_after_m,
+                }),
+                registration_skipped: f
+                    .registration
+                    .as_ref()
+                    .err()
+                    .map(ToString::to_string)
+                    .unwrap_or_default(),
             }),
         }
     }

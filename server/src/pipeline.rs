@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use landing_fusion::{FusionMap, Scan};
+use landing_fusion::{Correction, FusionMap, NotRegistered, Scan};
 use landing_geometry::{Disk, Params};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -25,6 +25,7 @@ pub struct StageTimings {
     pub decode: Option<Duration>,
     pub segmentation: Option<Duration>,
     pub classification: Option<Duration>,
+    pub fusion: Option<Duration>,
     pub triangulation: Option<Duration>,
     pub triangle_filter: Option<Duration>,
     pub plane_extraction: Option<Duration>,
@@ -42,6 +43,7 @@ impl StageTimings {
             ("decode", self.decode),
             ("segmentation", self.segmentation),
             ("classification", self.classification),
+            ("fusion", self.fusion),
             ("triangulation", self.triangulation),
             ("triangle_filter", self.triangle_filter),
             ("plane_extraction", self.plane_extraction),
@@ -89,7 +91,7 @@ pub struct FrameOutput {
 }
 
 /// The map a fused answer came from (`landing.v1.FusionSummary`).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct FusionSummary {
     pub frames: u32,
     pub points: usize,
@@ -97,6 +99,8 @@ pub struct FusionSummary {
     /// Why the map started over at this frame.
     pub reset: Option<String>,
     pub keep_out_frames: usize,
+    /// How the scan was laid onto the map, or why it was fused as it came.
+    pub registration: Result<Correction, NotRegistered>,
 }
 
 /// A stream's fusion map: cells of the scans and the obstacle rays of recent frames' masks.
@@ -214,15 +218,40 @@ pub fn run_fused(
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
     // The map bins in double precision; classification takes the same points as `to_world` gives.
-    let points = to_world_f64(&frame.cloud);
-    let world = points.iter().map(|p| p.map(|v| v as f32)).collect();
-    let mut c = classify(frame, world, options, pipeline)?;
+    let mut points = to_world_f64(&frame.cloud);
     let time_s = frame
         .timestamp
         .map(|t| t.seconds as f64 + f64::from(t.nanos) * 1e-9)
         .or(map.last_time_s())
         .unwrap_or(0.0);
+    let s = frame.cloud.pose.translation.vector;
+    let scan = Scan {
+        time_s,
+        sensor: [s.x, s.y, s.z],
+        reset,
+        ..Scan::new(&frame.drone_id)
+    };
+    // Lay the scan onto the map first: the frame's poses (LiDAR and cameras alike, one rigid
+    // body) move by the correction, so its classes and keep-out footprints land where its points
+    // do. A map about to start over has nothing to register to.
+    let registration = match map.would_reset(&scan) {
+        Some(_) => Err(NotRegistered::Nothing),
+        None => map.register(&points, scan.sensor),
+    };
+    let mut fusion_time = start.elapsed();
+    let corrected;
+    let frame = match &registration {
+        Ok(correction) => {
+            corrected = moved(frame, &isometry(correction));
+            points = to_world_f64(&corrected.cloud);
+            &corrected
+        }
+        Err(_) => frame,
+    };
+    let world = points.iter().map(|p| p.map(|v| v as f32)).collect();
+    let mut c = classify(frame, world, options, pipeline)?;
     let t = frame.cloud.pose.translation.vector;
+    let map_start = Instant::now();
     let reset = map.insert(Scan {
         drone_id: &frame.drone_id,
         time_s,
@@ -239,11 +268,14 @@ pub fn run_fused(
     let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
     let fused = map.fused(everything, |class| landable.contains(&class));
     let world: Vec<[f32; 3]> = fused.points.iter().map(|p| p.map(|v| v as f32)).collect();
+    fusion_time += map_start.elapsed();
+    c.timings.fusion = Some(fusion_time);
     let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
     let summary = FusionSummary {
         frames: map.frames(),
         points: world.len(),
         cells: map.cells(),
+        registration,
         reset: reset.map(|r| r.to_string()),
         keep_out_frames: keep_out.len(),
     };
@@ -255,6 +287,24 @@ pub fn run_fused(
     let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
     out.fusion = Some(summary);
     Ok(out)
+}
+
+/// The rigid motion a registration's correction describes, as an isometry of the world.
+fn isometry(c: &Correction) -> Isometry3<f64> {
+    let rotation = UnitQuaternion::from_scaled_axis(Vector3::from(c.rotation));
+    let pivot = Vector3::from(c.pivot);
+    let shift = pivot + Vector3::from(c.translation) - rotation * pivot;
+    Isometry3::from_parts(shift.into(), rotation)
+}
+
+/// `frame` with every pose it carries (LiDAR, camera, class camera) moved by `by`.
+fn moved(frame: &Frame, by: &Isometry3<f64>) -> Frame {
+    let mut f = frame.clone();
+    f.cloud.pose = by * f.cloud.pose;
+    for camera in [&mut f.image, &mut f.class_image].into_iter().flatten() {
+        camera.pose = by * camera.pose;
+    }
+    f
 }
 
 /// A frame's points with their classes, before geometry.
@@ -358,10 +408,11 @@ fn locate(
     let detection = if keep_out.is_empty() {
         landing_geometry::detect(world, classes, &options.params)?
     } else {
+        // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
+        // its view decides.
         let disks = |point, normal, bounds| {
-            keep_out
-                .iter()
-                .flat_map(|rays| rays.on_plane(point, normal, bounds))
+            ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
+                .into_iter()
                 .map(|(center, radius)| Disk { center, radius })
                 .collect()
         };

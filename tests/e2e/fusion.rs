@@ -65,6 +65,15 @@ async fn fused_answers_equal_the_in_process_fused_pipeline() {
         assert_eq!(fusion.frames as usize, i + 1);
         assert_eq!(fusion.points, got.point_count);
         assert!(fusion.reset_reason.is_empty());
+        // Each answer says how its scan was laid onto the map, or why it was not.
+        assert_ne!(
+            fusion.registration.is_some(),
+            !fusion.registration_skipped.is_empty(),
+            "frame {i}: {fusion:?}"
+        );
+        if i == 0 {
+            assert_eq!(fusion.registration_skipped, "nothing to register to");
+        }
         grew |= i > 0 && fusion.cells as usize > frame_points(frame);
     }
     assert!(grew, "the map holds more than one frame's points");
@@ -133,5 +142,7 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
     let configured = landing_server::Config::default().fusion;
     assert_eq!(defaults.cell_size_m, Some(configured.cell_size_m));
     assert_eq!(defaults.max_cells, Some(configured.max_cells));
+    assert_eq!(defaults.keep_out_frames, Some(configured.keep_out_frames));
+    assert_eq!(defaults.register_scans, Some(configured.register_scans));
     server.stop().await;
 }
