@@ -81,6 +81,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "sessions": int,
         "ort_library": str,
         "input_sizes": str,
+        "ort_log_level": str,
     },
     "auth": {"tokens_file": str},
     "tls": {"cert_path": str, "key_path": str, "client_ca_path": str},
@@ -88,6 +89,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
 }
 ENUMS = {
     ("segmentation", "execution_provider"): ("cpu", "cuda"),
+    ("segmentation", "ort_log_level"): ("verbose", "info", "warning", "error", "fatal"),
     ("log", "format"): ("pretty", "json"),
 }
 ENV_PREFIX = "LANDING__"

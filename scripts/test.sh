@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite: format, lints, the Rust tests (unit, property, doc, end-to-end over loopback
 # gRPC with the real model and real recordings), then the cross-language and deployment checks:
-# the Python MCAP reader, the segmentation smoke train + ONNX parity check, a Python grpcio client,
+# the Python MCAP reader, the segmentation smoke train + ONNX parity check, a Python grpcio client
+# and the stock Python reflection client,
 # the evaluation slice, single-frame and fused (fails on any unsafe site), and the deploy manifests/config/serve check.
 # Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
 # models/training/smoke.sh, deploy in deploy/check.sh.
@@ -55,6 +56,8 @@ step "a client that is not ours (Python grpcio) and the evaluation slice, agains
 server_pid=$!
 for _ in $(seq 1 150); do "$bin/landing" info >/dev/null 2>&1 && break; sleep 0.2; done
 "$py" client/examples/python/detect_one_frame.py --server 127.0.0.1:50051 --recording samples/rooftops.mcap
+# The stock reflection client (grpcio-reflection: v1alpha only) describes and calls the API.
+"$py" client/examples/python/reflect.py --server 127.0.0.1:50051
 "$bin/landing" eval --scenarios small --out "$tmp/eval-small" --gate model
 # The same approaches as fused streams, beside single frames: fails on an unsafe site in either.
 "$bin/landing" eval --scenarios small --out "$tmp/eval-small-stream" --stream --gate model

@@ -53,7 +53,7 @@ pub use image::RgbImage;
 pub use keep_out::ObstacleRays;
 pub use mask::{ClassMask, Confusion, IouReport, iou};
 pub use segmenter::{
-    DEFAULT_MODEL_PATH, ExecutionProvider, ModelInfo, Segmenter, SegmenterConfig,
+    DEFAULT_MODEL_PATH, ExecutionProvider, ModelInfo, OrtLogLevel, Segmenter, SegmenterConfig,
     resolve_ort_library, workspace_root,
 };
 

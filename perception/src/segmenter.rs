@@ -1,10 +1,12 @@
 //! The ONNX Runtime segmentation session.
 
 use std::path::{Path, PathBuf};
-use std::sync::{Mutex, OnceLock};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use image::RgbImage;
 use ort::environment::Environment;
+use ort::logging::LogLevel;
 use ort::session::Session;
 use ort::session::builder::{GraphOptimizationLevel, SessionBuilder};
 use ort::value::{TensorElementType, TensorRef};
@@ -65,6 +67,94 @@ impl std::str::FromStr for ExecutionProvider {
     }
 }
 
+/// The least severe of ONNX Runtime's own log messages that reach the `tracing` logs (target
+/// `ort`). ONNX Runtime writes about 200 INFO lines while it loads a model, so the default is
+/// [`OrtLogLevel::Warning`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[non_exhaustive]
+pub enum OrtLogLevel {
+    /// Everything, graph transformations included.
+    Verbose,
+    /// Session and provider set-up as well.
+    Info,
+    /// Only what may need attention (the default).
+    #[default]
+    Warning,
+    /// Only failures.
+    Error,
+    /// Only failures that end the runtime.
+    Fatal,
+}
+
+impl OrtLogLevel {
+    /// Every level, most verbose first.
+    pub const ALL: [Self; 5] = [
+        Self::Verbose,
+        Self::Info,
+        Self::Warning,
+        Self::Error,
+        Self::Fatal,
+    ];
+
+    /// `"verbose"`, `"info"`, `"warning"`, `"error"` or `"fatal"`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Verbose => "verbose",
+            Self::Info => "info",
+            Self::Warning => "warning",
+            Self::Error => "error",
+            Self::Fatal => "fatal",
+        }
+    }
+}
+
+impl std::fmt::Display for OrtLogLevel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for OrtLogLevel {
+    type Err = PerceptionError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let lower = s.trim().to_ascii_lowercase();
+        let name = if lower == "warn" { "warning" } else { &lower };
+        Self::ALL
+            .into_iter()
+            .find(|l| l.as_str() == name)
+            .ok_or_else(|| PerceptionError::InvalidConfig {
+                field: "ort_log_level",
+                value: format!("{s:?}"),
+                reason: "expected \"verbose\", \"info\", \"warning\", \"error\" or \"fatal\"",
+            })
+    }
+}
+
+impl From<LogLevel> for OrtLogLevel {
+    fn from(level: LogLevel) -> Self {
+        match level {
+            LogLevel::Verbose => Self::Verbose,
+            LogLevel::Info => Self::Info,
+            LogLevel::Warning => Self::Warning,
+            LogLevel::Error => Self::Error,
+            LogLevel::Fatal => Self::Fatal,
+        }
+    }
+}
+
+impl From<OrtLogLevel> for LogLevel {
+    fn from(level: OrtLogLevel) -> Self {
+        match level {
+            OrtLogLevel::Verbose => Self::Verbose,
+            OrtLogLevel::Info => Self::Info,
+            OrtLogLevel::Warning => Self::Warning,
+            OrtLogLevel::Error => Self::Error,
+            OrtLogLevel::Fatal => Self::Fatal,
+        }
+    }
+}
+
 /// How to build a [`Segmenter`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct SegmenterConfig {
@@ -82,6 +172,9 @@ pub struct SegmenterConfig {
     /// of 32 waste nothing). `None`: the model's metadata
     /// (`input_width`/`input_height`), else [`DEFAULT_INPUT_SIZE`].
     pub input_size: Option<(u32, u32)>,
+    /// The least severe ONNX Runtime log message passed on. The runtime is loaded once per
+    /// process and its level is process-wide: the last segmenter built sets it.
+    pub ort_log_level: OrtLogLevel,
 }
 
 impl Default for SegmenterConfig {
@@ -92,6 +185,7 @@ impl Default for SegmenterConfig {
             intra_threads: 1,
             ort_library: None,
             input_size: None,
+            ort_log_level: OrtLogLevel::default(),
         }
     }
 }
@@ -166,7 +260,7 @@ impl Segmenter {
     /// Loads ONNX Runtime (once per process) and the model, and checks the model's signature.
     pub fn new(config: &SegmenterConfig) -> Result<Self, PerceptionError> {
         config.validate()?;
-        let (library, env) = environment(config.ort_library.as_deref())?;
+        let (library, env) = environment(config.ort_library.as_deref(), config.ort_log_level)?;
         let bytes = std::fs::read(&config.model_path).map_err(|e| PerceptionError::ModelRead {
             path: config.model_path.clone(),
             message: e.to_string(),
@@ -341,8 +435,13 @@ pub fn workspace_root() -> PathBuf {
 static ENVIRONMENT: OnceLock<(PathBuf, Environment)> = OnceLock::new();
 static ENVIRONMENT_INIT: Mutex<()> = Mutex::new(());
 
-fn environment(configured: Option<&Path>) -> Result<(PathBuf, Environment), PerceptionError> {
+fn environment(
+    configured: Option<&Path>,
+    level: OrtLogLevel,
+) -> Result<(PathBuf, Environment), PerceptionError> {
+    ORT_LOG_LEVEL.store(level as u8, Ordering::Relaxed);
     if let Some((loaded, env)) = ENVIRONMENT.get() {
+        env.set_log_level(level.into());
         if let Some(asked) = configured
             && asked != loaded
         {
@@ -358,6 +457,7 @@ fn environment(configured: Option<&Path>) -> Result<(PathBuf, Environment), Perc
         .lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     if let Some((loaded, env)) = ENVIRONMENT.get() {
+        env.set_log_level(level.into());
         return Ok((loaded.clone(), env.clone()));
     }
     let library = resolve_ort_library(configured)?;
@@ -369,13 +469,39 @@ fn environment(configured: Option<&Path>) -> Result<(PathBuf, Environment), Perc
         })?
         .with_name("landing-perception")
         .with_telemetry(false)
+        .with_logger(Arc::new(forward_ort_log))
         .build()
         .map_err(|e| PerceptionError::RuntimeLibraryLoad {
             path: library.clone(),
             message: e.to_string(),
         })?;
+    // The environment is created passing on every message, verbose ones included; from here
+    // on ONNX Runtime drops those below the level itself.
+    env.set_log_level(level.into());
     let _ = ENVIRONMENT.set((library.clone(), env.clone()));
     Ok((library, env))
+}
+
+/// The least severe ONNX Runtime message passed on (an [`OrtLogLevel`] as `u8`): process-wide,
+/// like the runtime.
+static ORT_LOG_LEVEL: AtomicU8 = AtomicU8::new(OrtLogLevel::Warning as u8);
+
+/// ONNX Runtime's logger: passes its messages at or above [`ORT_LOG_LEVEL`] to `tracing` (target
+/// `ort::logging`, as ort's own forwarding names it). It filters itself because the runtime
+/// logs while its environment is created, before it can be told a level.
+fn forward_ort_log(level: LogLevel, _category: &str, id: &str, location: &str, message: &str) {
+    let level = OrtLogLevel::from(level);
+    if (level as u8) < ORT_LOG_LEVEL.load(Ordering::Relaxed) {
+        return;
+    }
+    const TARGET: &str = "ort::logging";
+    match level {
+        OrtLogLevel::Verbose => tracing::trace!(target: TARGET, id, location, "{message}"),
+        OrtLogLevel::Info => tracing::info!(target: TARGET, id, location, "{message}"),
+        OrtLogLevel::Warning => tracing::warn!(target: TARGET, id, location, "{message}"),
+        OrtLogLevel::Error => tracing::error!(target: TARGET, id, location, "{message}"),
+        OrtLogLevel::Fatal => tracing::error!(target: TARGET, id, location, "(fatal) {message}"),
+    }
 }
 
 fn base_builder(
@@ -396,6 +522,8 @@ fn base_builder(
         .with_intra_op_spinning(false)
         .map_err(|e| PerceptionError::runtime(stage, e))?
         .with_inter_op_spinning(false)
+        .map_err(|e| PerceptionError::runtime(stage, e))?
+        .with_log_level(config.ort_log_level.into())
         .map_err(|e| PerceptionError::runtime(stage, e))
 }
 

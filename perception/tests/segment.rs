@@ -6,8 +6,8 @@ mod common;
 use std::sync::Arc;
 
 use landing_perception::{
-    Confusion, ExecutionProvider, ImageData, PerceptionError, Segmenter, SegmenterConfig,
-    decode_image, resolve_ort_library,
+    Confusion, ExecutionProvider, ImageData, OrtLogLevel, PerceptionError, Segmenter,
+    SegmenterConfig, decode_image, resolve_ort_library,
 };
 
 /// Mean IoU, over the classes with at least [`MIN_CLASS_PIXELS`] truth pixels, that the shipped
@@ -195,4 +195,22 @@ fn bad_config_is_refused_before_loading() {
     })
     .unwrap_err();
     assert!(err.to_string().contains("input_size"), "{err}");
+}
+
+#[test]
+fn ort_log_levels_parse_by_name_and_a_bad_one_is_named() {
+    for level in OrtLogLevel::ALL {
+        assert_eq!(level.as_str().parse::<OrtLogLevel>().unwrap(), level);
+    }
+    assert_eq!("WARN".parse::<OrtLogLevel>().unwrap(), OrtLogLevel::Warning);
+    assert_eq!(OrtLogLevel::default(), OrtLogLevel::Warning);
+    assert_eq!(
+        SegmenterConfig::default().ort_log_level,
+        OrtLogLevel::Warning
+    );
+    let err = "loud".parse::<OrtLogLevel>().unwrap_err().to_string();
+    assert!(
+        err.contains("ort_log_level") && err.contains("loud"),
+        "{err}"
+    );
 }

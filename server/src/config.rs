@@ -153,9 +153,26 @@ pub struct SegmentationConfig {
     /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
     /// sees rooftop-entrance tops best (EVALUATION.md).
     pub input_sizes: String,
+    /// The least severe of ONNX Runtime's own log messages that is logged: "verbose", "info",
+    /// "warning", "error" or "fatal". ONNX Runtime writes about 200 INFO lines while it loads
+    /// the model; `log.filter` still applies to what passes (its target is `ort`).
+    pub ort_log_level: String,
 }
 
 impl SegmentationConfig {
+    /// `ort_log_level` parsed.
+    pub fn parsed_ort_log_level(&self) -> Result<landing_perception::OrtLogLevel, Error> {
+        self.ort_log_level.parse().map_err(|_| {
+            Error::config(
+                "segmentation.ort_log_level",
+                format!(
+                    "{:?} is not one of \"verbose\", \"info\", \"warning\", \"error\", \"fatal\"",
+                    self.ort_log_level
+                ),
+            )
+        })
+    }
+
     /// `input_sizes` parsed, finest first; empty for the model's own size.
     pub fn parsed_input_sizes(&self) -> Result<Vec<(u32, u32)>, Error> {
         const KEY: &str = "segmentation.input_sizes";
@@ -201,6 +218,7 @@ impl Default for SegmentationConfig {
             sessions: 1,
             ort_library: PathBuf::new(),
             input_sizes: "320x240,256x192".into(),
+            ort_log_level: landing_perception::OrtLogLevel::default().to_string(),
         }
     }
 }
@@ -339,6 +357,7 @@ impl Config {
             ));
         }
         g.parsed_input_sizes()?;
+        g.parsed_ort_log_level()?;
         if g.enabled {
             require_file("segmentation.model_path", &g.model_path)?;
             if !g.ort_library.as_os_str().is_empty() {
@@ -587,6 +606,11 @@ mod tests {
             (c.log.format.as_str(), c.log.filter.as_str()),
             ("pretty", "info")
         );
+        assert_eq!(c.segmentation.ort_log_level, "warning");
+        assert_eq!(
+            c.segmentation.parsed_ort_log_level().unwrap(),
+            landing_perception::OrtLogLevel::Warning
+        );
     }
 
     #[test]
@@ -605,9 +629,17 @@ mod tests {
                 "LANDING__PIPELINE__STREAM_BUFFER".to_owned(),
                 "9".to_owned(),
             ),
+            (
+                "LANDING__SEGMENTATION__ORT_LOG_LEVEL".to_owned(),
+                "error".to_owned(),
+            ),
             ("UNRELATED".to_owned(), "x".to_owned()),
         ];
         let c = Config::load(Some(&path), env).unwrap();
+        assert_eq!(
+            c.segmentation.parsed_ort_log_level().unwrap(),
+            landing_perception::OrtLogLevel::Error
+        );
         assert_eq!(c.server.listen, "127.0.0.1:7000");
         assert_eq!(c.server.shutdown_grace_s, 3.0);
         assert_eq!(c.pipeline.queue_capacity, 8);
@@ -679,6 +711,10 @@ mod tests {
             (
                 "[segmentation]\ninput_sizes = \"320\"\n",
                 "segmentation.input_sizes",
+            ),
+            (
+                "[segmentation]\nort_log_level = \"loud\"\n",
+                "segmentation.ort_log_level",
             ),
             (
                 "[auth]\ntokens_file = \"/nonexistent/tokens\"\n",

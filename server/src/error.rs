@@ -46,6 +46,9 @@ pub enum Error {
         capacity: usize,
         retry_after: Duration,
     },
+    /// A request message is larger than `server.max_request_bytes`; resending it cannot succeed.
+    #[error("request of {bytes} bytes exceeds server.max_request_bytes = {limit}")]
+    RequestTooLarge { bytes: u64, limit: u64 },
     /// The caller's deadline passed before the frame's result was ready.
     #[error("the caller's deadline passed before the frame's result was ready")]
     DeadlineExceeded,

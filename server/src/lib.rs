@@ -78,6 +78,7 @@ pub mod detect;
 mod error;
 pub mod frame;
 pub mod geodetic;
+mod limit;
 pub mod pipeline;
 pub mod segmentation;
 pub mod server;

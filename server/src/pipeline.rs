@@ -34,25 +34,43 @@ pub struct StageTimings {
     pub total: Option<Duration>,
 }
 
+/// Every step's name, as [`StageTimings::named`] gives them, in pipeline order: the
+/// `landing.v1.StageTimings` field names, one list for the JSON output and the metrics alike.
+pub const STAGES: [&str; 11] = [
+    "queue",
+    "decode",
+    "segmentation",
+    "classification",
+    "fusion",
+    "triangulation",
+    "triangle_filter",
+    "plane_extraction",
+    "polygon_extraction",
+    "polylabel",
+    "total",
+];
+
 impl StageTimings {
-    /// The steps that ran, by their `landing.v1.StageTimings` field names, in pipeline order
-    /// (`queue` first, `total` last): one list for the JSON output and the metrics alike.
+    /// The steps that ran, by their names in [`STAGES`], in pipeline order (`queue` first,
+    /// `total` last).
     pub fn named(&self) -> impl Iterator<Item = (&'static str, Duration)> {
-        [
-            ("queue", self.queue),
-            ("decode", self.decode),
-            ("segmentation", self.segmentation),
-            ("classification", self.classification),
-            ("fusion", self.fusion),
-            ("triangulation", self.triangulation),
-            ("triangle_filter", self.triangle_filter),
-            ("plane_extraction", self.plane_extraction),
-            ("polygon_extraction", self.polygon_extraction),
-            ("polylabel", self.polylabel),
-            ("total", self.total),
-        ]
-        .into_iter()
-        .filter_map(|(name, d)| d.map(|d| (name, d)))
+        let durations = [
+            self.queue,
+            self.decode,
+            self.segmentation,
+            self.classification,
+            self.fusion,
+            self.triangulation,
+            self.triangle_filter,
+            self.plane_extraction,
+            self.polygon_extraction,
+            self.polylabel,
+            self.total,
+        ];
+        STAGES
+            .into_iter()
+            .zip(durations)
+            .filter_map(|(name, d)| d.map(|d| (name, d)))
     }
 }
 

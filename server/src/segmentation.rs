@@ -51,6 +51,7 @@ impl Segmenter {
             ort_library: (!config.ort_library.as_os_str().is_empty())
                 .then(|| config.ort_library.clone()),
             input_size: None,
+            ort_log_level: config.parsed_ort_log_level()?,
         };
         let sizes = config.parsed_input_sizes()?;
         let sessions = (0..config.sessions.max(1))

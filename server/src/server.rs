@@ -17,6 +17,7 @@ use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 
 use crate::auth::Auth;
 use crate::config::{Config, read_tokens};
+use crate::limit::RequestLimit;
 use crate::pipeline::Pipeline;
 use crate::segmentation;
 use crate::service::LandingService;
@@ -108,7 +109,12 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .local_addr()
         .context("read the listener's address")?;
     let pipeline = load_pipeline(&config)?;
-    let metrics = Metrics::new();
+    let model_sha256 = pipeline
+        .segmenter
+        .as_ref()
+        .map(|s| s.model_info().sha256)
+        .unwrap_or_default();
+    let metrics = Metrics::new(&model_sha256);
     let metrics_listener = match config.metrics_addr()? {
         Some(a) => Some(
             TcpListener::bind(a)
@@ -153,17 +159,24 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .max_encoding_message_size(max);
     let auth = Auth { tokens };
     let landing = InterceptedService::new(landing, auth.clone());
+    // Refuses an oversized message with RESOURCE_EXHAUSTED naming the limit, before tonic's
+    // own check (the same limit) would answer OUT_OF_RANGE.
+    let landing = RequestLimit::new(landing, config.server.max_request_bytes);
 
     let (health_reporter, health) = tonic_health::server::health_reporter();
     health_reporter
         .set_serving::<LandingServiceServer<LandingService>>()
         .await;
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(landing_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    // Both reflection versions: v1 for current tools, v1alpha for the stock Python client
+    // (grpcio-reflection) and older tools, which know no other.
+    let reflection_v1 = reflection()
         .build_v1()
-        .context("build the reflection service")?;
-    let reflection = InterceptedService::new(reflection, auth);
+        .context("build the reflection service (v1)")?;
+    let reflection_v1alpha = reflection()
+        .build_v1alpha()
+        .context("build the reflection service (v1alpha)")?;
+    let reflection_v1 = InterceptedService::new(reflection_v1, auth.clone());
+    let reflection_v1alpha = InterceptedService::new(reflection_v1alpha, auth);
 
     // Frames are hundreds of KiB to MiBs: HTTP/2's default 64 KiB windows would cost a round trip
     // per window of every frame.
@@ -177,7 +190,8 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
     }
     let router = builder
         .add_service(health)
-        .add_service(reflection)
+        .add_service(reflection_v1)
+        .add_service(reflection_v1alpha)
         .add_service(landing);
 
     let (stop_tx, stop_rx) = oneshot::channel::<()>();
@@ -236,6 +250,17 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         shutdown: Some(stop_tx),
         task,
     })
+}
+
+/// A reflection builder describing everything served: the landing API, health and both
+/// reflection versions (each version lists the other too, since both are served).
+fn reflection() -> tonic_reflection::server::Builder<'static> {
+    tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(landing_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET)
+        .include_reflection_service(false)
 }
 
 /// The pipeline the config asks for: default parameters and, when enabled, the model.

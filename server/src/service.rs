@@ -13,6 +13,7 @@ use tonic::{Request, Response, Status, Streaming};
 use crate::auth::Arrived;
 use crate::convert;
 use crate::status::{to_rpc_status, to_status};
+use crate::telemetry::Rpc;
 use crate::workers::{Dispatcher, Done, FusionTurn, StreamFusion};
 
 /// Whether a stream fuses, as its first message asked.
@@ -101,7 +102,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         // Awaited in place: if the caller goes away, tonic drops this future and the frame stops.
         match self
             .dispatcher
-            .process("unary", parts, deadline, never(), None)
+            .process(Rpc::Unary, parts, deadline, never(), None)
             .await
         {
             Done::Computed(out) => Ok(Response::new(v1::DetectLandingSitesResponse {
@@ -127,6 +128,10 @@ impl v1::landing_service_server::LandingService for LandingService {
         // (arrival index, sequence) of the newest frame, for LATEST.
         let (latest_tx, latest_rx) = watch::channel((0u64, 0u64));
         let (cancel_tx, mut cancel_rx) = watch::channel(false);
+        // Why the input ended, when it broke (a message over `server.max_request_bytes`, one
+        // that does not decode): the stream's final status, after every frame before it is
+        // answered.
+        let (broken_tx, mut broken_rx) = tokio::sync::oneshot::channel::<Status>();
         let dispatcher = self.dispatcher.clone();
         let fusion_defaults = self.fusion;
         let mut draining = self.draining.clone();
@@ -161,6 +166,7 @@ impl v1::landing_service_server::LandingService for LandingService {
                     Ok(None) => break,
                     Err(status) => {
                         tracing::debug!(%status, "stream input ended with an error");
+                        let _ = broken_tx.send(status);
                         break;
                     }
                 };
@@ -214,8 +220,13 @@ impl v1::landing_service_server::LandingService for LandingService {
                     } else {
                         Box::pin(never())
                     };
-                let job =
-                    tokio::spawn(dispatcher.process("stream", parts, deadline, superseded, turn));
+                let job = tokio::spawn(dispatcher.process(
+                    Rpc::Stream,
+                    parts,
+                    deadline,
+                    superseded,
+                    turn,
+                ));
                 if pending_tx.send((sequence, job)).await.is_err() {
                     break;
                 }
@@ -248,6 +259,10 @@ impl v1::landing_service_server::LandingService for LandingService {
                 {
                     break;
                 }
+            }
+            // The reader sent its error, if any, before it let go of `pending_tx`.
+            if let Ok(status) = broken_rx.try_recv() {
+                let _ = out_tx.send(Err(status)).await;
             }
             let _ = cancel_tx.send(true);
             abort_rest(&mut pending_rx);

@@ -24,6 +24,9 @@ pub fn code_of(error: &Error) -> Code {
         Error::Segmentation(_) => Code::Internal,
         Error::Geometry(g) => geometry_code(g),
         Error::Overloaded { .. } => Code::ResourceExhausted,
+        // gRPC's code for a message over the receiver's limit; no RetryInfo, since a retry of
+        // the same message is refused the same way.
+        Error::RequestTooLarge { .. } => Code::ResourceExhausted,
         Error::DeadlineExceeded => Code::DeadlineExceeded,
         Error::Cancelled => Code::Cancelled,
         Error::ShuttingDown => Code::Unavailable,
@@ -152,6 +155,13 @@ mod tests {
                 Error::Overloaded {
                     capacity: 1,
                     retry_after: Duration::from_millis(5),
+                },
+                Code::ResourceExhausted,
+            ),
+            (
+                Error::RequestTooLarge {
+                    bytes: 2 << 20,
+                    limit: 1 << 20,
                 },
                 Code::ResourceExhausted,
             ),

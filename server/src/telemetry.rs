@@ -1,5 +1,10 @@
 //! Logs (tracing, pretty or JSON) and metrics (Prometheus, one recorder per server, served on its
 //! own port). Every metric is counted here, through [`Metrics`], from the dispatch layer.
+//!
+//! Every metric is registered with its help text when the server starts, so the first scrape,
+//! before any frame, already shows them all: the counters at 0 for every label value known at
+//! start ([`Rpc::ALL`] × [`Outcome::ALL`]), the gauges at 0, the histograms empty, and
+//! `landing_build_info` (always 1) with the version and the model's SHA-256.
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -35,6 +40,28 @@ pub fn init_tracing(log: &LogConfig) -> Result<(), Error> {
     Ok(())
 }
 
+/// The call a frame came in on, as counted in `landing_frames_total{rpc}`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Rpc {
+    /// `DetectLandingSites`.
+    Unary,
+    /// `StreamLandingSites`.
+    Stream,
+}
+
+impl Rpc {
+    /// Every call, so that each has its series from the start.
+    pub const ALL: [Self; 2] = [Self::Unary, Self::Stream];
+
+    /// The label value.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Unary => "unary",
+            Self::Stream => "stream",
+        }
+    }
+}
+
 /// How one frame ended, as counted in `landing_frames_total{outcome}`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {
@@ -49,6 +76,18 @@ pub enum Outcome {
 }
 
 impl Outcome {
+    /// Every outcome, so that each has its series from the start.
+    pub const ALL: [Self; 8] = [
+        Self::Ok,
+        Self::Invalid,
+        Self::Overloaded,
+        Self::DeadlineExceeded,
+        Self::Cancelled,
+        Self::Skipped,
+        Self::Unavailable,
+        Self::Failed,
+    ];
+
     /// The label value.
     pub fn as_str(self) -> &'static str {
         match self {
@@ -96,8 +135,10 @@ const LATENCY_BUCKETS: [f64; 14] = [
 ];
 
 impl Metrics {
-    /// A fresh recorder.
-    pub fn new() -> Self {
+    /// A fresh recorder with every metric registered: described, counters and gauges at 0,
+    /// histograms empty, and `landing_build_info` naming this build and `model_sha256` (the
+    /// SHA-256 of the loaded model file, as `GetServiceInfo` reports it; "" without a model).
+    pub fn new(model_sha256: &str) -> Self {
         let recorder = PrometheusBuilder::new()
             .set_buckets(&LATENCY_BUCKETS)
             .map(PrometheusBuilder::build_recorder)
@@ -108,6 +149,7 @@ impl Metrics {
             handle,
         };
         metrics.describe();
+        metrics.register(model_sha256);
         metrics
     }
 
@@ -146,11 +188,49 @@ impl Metrics {
                 metrics::Unit::Bytes,
                 "Memory the open fusion maps hold (cells and kept obstacle rays)."
             );
+            metrics::describe_gauge!(
+                "landing_build_info",
+                "Always 1; the labels name the server version and the SHA-256 of the segmentation model file (\"\" without a model)."
+            );
+        });
+    }
+
+    /// Creates every series whose labels are known at start, so that a scrape before the first
+    /// frame shows each metric (and dashboards and absent-series alerts see 0, not nothing).
+    fn register(&self, model_sha256: &str) {
+        self.with(|| {
+            for rpc in Rpc::ALL {
+                for outcome in Outcome::ALL {
+                    metrics::counter!("landing_frames_total", "rpc" => rpc.as_str(), "outcome" => outcome.as_str())
+                        .absolute(0);
+                }
+                // Registered, not recorded: an empty histogram.
+                let _ = metrics::histogram!("landing_frame_seconds", "rpc" => rpc.as_str());
+            }
+            for stage in crate::pipeline::STAGES.iter().filter(|s| **s != "total") {
+                let _ = metrics::histogram!("landing_stage_seconds", "stage" => *stage);
+            }
+            for gauge in [
+                "landing_queue_depth",
+                "landing_in_flight",
+                "landing_streams_open",
+                "landing_fusion_maps_open",
+                "landing_fusion_map_bytes",
+            ] {
+                metrics::gauge!(gauge).set(0.0);
+            }
+            metrics::gauge!(
+                "landing_build_info",
+                "version" => env!("CARGO_PKG_VERSION"),
+                "model_sha256" => model_sha256.to_owned()
+            )
+            .set(1.0);
         });
     }
 
     /// Counts a finished frame.
-    pub fn frame(&self, rpc: &'static str, outcome: Outcome, total: Duration) {
+    pub fn frame(&self, rpc: Rpc, outcome: Outcome, total: Duration) {
+        let rpc = rpc.as_str();
         self.with(|| {
             metrics::counter!("landing_frames_total", "rpc" => rpc, "outcome" => outcome.as_str())
                 .increment(1);
@@ -200,8 +280,9 @@ impl Metrics {
 }
 
 impl Default for Metrics {
+    /// The metrics of a server without a model.
     fn default() -> Self {
-        Self::new()
+        Self::new("")
     }
 }
 

@@ -14,7 +14,7 @@ use crate::Error;
 use crate::pipeline::{
     Frame, FrameOptions, FrameOutput, Pipeline, StreamMap, run_fused, run_pipeline,
 };
-use crate::telemetry::{Metrics, Outcome};
+use crate::telemetry::{Metrics, Outcome, Rpc};
 
 /// How a frame ended.
 #[derive(Debug)]
@@ -134,7 +134,7 @@ impl Dispatcher {
     /// the frame waits for its turn before a worker, and is computed from the stream's map.
     pub fn process(
         self: &Arc<Self>,
-        rpc: &'static str,
+        rpc: Rpc,
         parts: Result<(Frame, FrameOptions), Error>,
         deadline: Option<Instant>,
         superseded: impl Future<Output = u64> + Send + 'static,
@@ -156,7 +156,12 @@ impl Dispatcher {
         self.gauges();
         let this = self.clone();
         let sequence = parts.as_ref().map_or(0, |(f, _)| f.sequence);
-        let span = tracing::info_span!("frame", rpc, sequence, outcome = tracing::field::Empty);
+        let span = tracing::info_span!(
+            "frame",
+            rpc = rpc.as_str(),
+            sequence,
+            outcome = tracing::field::Empty
+        );
         async move {
             let done = match (parts, admitted) {
                 (Err(e), _) | (Ok(_), Err(e)) => Done::Failed(e),

@@ -92,3 +92,93 @@ async fn the_shutdown_handlers_are_installed_before_the_future_is_polled() {
         .await
         .expect("the SIGTERM sent before the first poll was not seen");
 }
+
+/// The JSON log lines that `landing-server serve`, with the shipped model and `env`, writes
+/// until it announces that it serves; then it is stopped with SIGTERM.
+fn startup_log(env: &[(&str, &str)]) -> Vec<serde_json::Value> {
+    let model = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../models/rooftop-segmentation.onnx"
+    );
+    let mut command = Command::new(env!("CARGO_BIN_EXE_landing-server"));
+    command
+        .args(["serve", "--listen", "127.0.0.1:0", "--metrics-listen", ""])
+        .env("LANDING__SEGMENTATION__MODEL_PATH", model)
+        .env("LANDING__LOG__FORMAT", "json")
+        .env_remove("RUST_LOG")
+        .env_remove("ORT_LOG")
+        .stderr(Stdio::piped());
+    for (k, v) in env {
+        command.env(k, v);
+    }
+    let mut child = command.spawn().unwrap();
+    let stderr = child.stderr.take().unwrap();
+    // Read on a thread to the end: the server still logs while it drains, into an open pipe.
+    let (tx, rx) = std::sync::mpsc::channel::<String>();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut lines = Vec::new();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    loop {
+        let line = rx
+            .recv_timeout(deadline.saturating_duration_since(Instant::now()))
+            .unwrap_or_else(|e| panic!("no 'serving' log line ({e}): {lines:#?}"));
+        let doc: serde_json::Value = serde_json::from_str(&line)
+            .unwrap_or_else(|e| panic!("not a JSON log line ({e}): {line}"));
+        let serving = doc["fields"]["message"] == "serving landing.v1";
+        lines.push(doc);
+        if serving {
+            break;
+        }
+    }
+    let pid = child.id().to_string();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &pid])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let exit = child.wait().unwrap();
+    assert!(exit.success(), "exit {exit:?}; log: {lines:#?}");
+    lines
+}
+
+/// The lines of ONNX Runtime's own log (its messages come through `tracing` as `ort::logging`;
+/// the `ort` crate's own lines, such as the one naming the library it loaded, are not its).
+fn ort_lines(log: &[serde_json::Value]) -> Vec<&serde_json::Value> {
+    log.iter()
+        .filter(|l| l["target"] == "ort::logging")
+        .collect()
+}
+
+#[test]
+fn onnx_runtime_logs_at_warning_by_default_and_as_configured() {
+    // Needs the ONNX Runtime library (scripts/setup-ort.sh) and the shipped model.
+    let quiet = startup_log(&[]);
+    let below_warning: Vec<_> = ort_lines(&quiet)
+        .into_iter()
+        .filter(|l| !matches!(l["level"].as_str(), Some("WARN" | "ERROR")))
+        .collect();
+    assert!(below_warning.is_empty(), "{below_warning:#?}");
+    assert!(
+        quiet
+            .iter()
+            .any(|l| l["fields"]["message"] == "segmentation model loaded"),
+        "the model was not loaded: {quiet:#?}"
+    );
+
+    // The key turns them back on: loading the model is about 200 INFO lines.
+    let chatty = startup_log(&[("LANDING__SEGMENTATION__ORT_LOG_LEVEL", "info")]);
+    let info = ort_lines(&chatty)
+        .into_iter()
+        .filter(|l| l["level"] == "INFO")
+        .count();
+    assert!(
+        info >= 20,
+        "{info} ONNX Runtime INFO lines with ort_log_level = \"info\""
+    );
+}

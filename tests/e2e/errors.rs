@@ -1,15 +1,19 @@
-//! Bad input: a clear error naming the field, and nothing else lost.
+//! Bad input: a clear error naming the field (or, for a message over `server.max_request_bytes`,
+//! the limit), and nothing else lost.
 
 use std::time::Duration;
 
-use landing_client::v1::{Frame, PipelineOptions, SegmentationMode};
+use landing_client::v1::{
+    DetectLandingSitesRequest, Frame, PipelineOptions, SegmentationMode, StreamLandingSitesRequest,
+};
 use landing_client::{
     ClientError, FrameBuilder, FrameOutcome, ImageData, LandingClient, PointCloudBuilder,
-    camera_image, intrinsics_from_fov, pose,
+    StreamConfig, camera_image, intrinsics_from_fov, pose,
 };
 use landing_geometry::synthetic::{Scene, SceneParams};
+use prost::Message as _;
 
-use crate::support::{TestServer, check_frames, mode, scene};
+use crate::support::{TestServer, check_frames, mode, scene, server_config};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_bad_frame_mid_stream_is_refused_by_field_and_the_stream_goes_on() {
@@ -173,5 +177,131 @@ async fn class_image_errors_name_the_field() {
         got == ["frame.class_image.compressed.data"],
         "an RGB PNG is refused by its pixels: {got:?}"
     );
+    server.stop().await;
+}
+
+/// A server whose `server.max_request_bytes` is twice the size of scene 31's frames (at least
+/// the 1 MiB the config allows), and that limit.
+async fn small_limit_server() -> (TestServer, u64) {
+    let frame = &scene(31).frames[0].frame;
+    let limit = (2 * frame.encoded_len() as u64).max(1 << 20);
+    let mut config = server_config();
+    config.server.max_request_bytes = limit;
+    (TestServer::with_config(config).await, limit)
+}
+
+/// `frame` with its `drone_id` padded so that `request(frame)` encodes to exactly `len` bytes.
+fn padded_to<M: prost::Message>(frame: &Frame, len: usize, request: impl Fn(Frame) -> M) -> Frame {
+    let mut padded = frame.clone();
+    for _ in 0..8 {
+        let n = request(padded.clone()).encoded_len();
+        if n == len {
+            return padded;
+        }
+        // Length prefixes grow and shrink with the padding, so this may take a few rounds.
+        let pad = (padded.drone_id.len() + len)
+            .checked_sub(n)
+            .expect("room to pad");
+        padded.drone_id = "p".repeat(pad);
+    }
+    panic!("cannot pad to {len} bytes")
+}
+
+fn too_large_message(bytes: usize, limit: u64) -> String {
+    format!("request of {bytes} bytes exceeds server.max_request_bytes = {limit}")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_unary_request_over_max_request_bytes_is_resource_exhausted_naming_the_limit() {
+    let (server, limit) = small_limit_server().await;
+    let client = server.client().await;
+    let frame = scene(31).frames[0].frame.clone();
+    let unary = |frame| DetectLandingSitesRequest {
+        frame: Some(frame),
+        options: None,
+    };
+
+    // One byte over: refused before it is read, whatever is in it.
+    let over = limit as usize + 1;
+    let err = client
+        .detect(padded_to(&frame, over, unary))
+        .await
+        .unwrap_err();
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
+    assert_eq!(e.code, tonic::Code::ResourceExhausted, "{e}");
+    assert_eq!(e.message, too_large_message(over, limit));
+    assert!(
+        e.retry_delay.is_none(),
+        "a retry would be refused the same way: {e}"
+    );
+
+    // At the limit: read and validated (its padded drone_id is too long).
+    let err = client
+        .detect(padded_to(&frame, limit as usize, unary))
+        .await
+        .unwrap_err();
+    let ClientError::Status(e) = &err else {
+        panic!("{err}")
+    };
+    assert_eq!(e.code, tonic::Code::InvalidArgument, "{e}");
+    assert!(e.fields().contains(&"frame.drone_id"), "{e}");
+
+    // The connection still serves normal frames.
+    client.detect(frame).await.expect("a frame under the limit");
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_message_over_max_request_bytes_ends_the_stream_with_resource_exhausted() {
+    let (server, limit) = small_limit_server().await;
+    let client = server.client().await;
+    let frames: Vec<Frame> = scene(31).frames.iter().map(|f| f.frame.clone()).collect();
+    let options = mode(SegmentationMode::None);
+    // How the SDK sends every frame after the first.
+    let later = |frame| StreamLandingSitesRequest {
+        frame: Some(frame),
+        options: Some(options.clone()),
+        ..Default::default()
+    };
+    let over = limit as usize + 1;
+    let big = padded_to(&frames[2], over, later);
+    let (mut tx, mut rx) = client.open_stream(StreamConfig {
+        options: Some(options.clone()),
+        max_in_flight: 4,
+        ..Default::default()
+    });
+    for frame in [frames[0].clone(), frames[1].clone(), big] {
+        // The server may end the stream before the big frame is handed over.
+        if tx.send(frame).await.is_err() {
+            break;
+        }
+    }
+    tx.finish();
+    let mut answered = Vec::new();
+    let broken = loop {
+        match rx.next().await.expect("the stream ends with an error") {
+            Ok(item) => answered.push(item),
+            Err(e) => break e,
+        }
+    };
+    assert!(rx.next().await.is_none());
+    // The frames before the big one are answered, in order, then the stream ends.
+    let sequences: Vec<u64> = answered.iter().map(|i| i.sequence).collect();
+    assert_eq!(sequences, [frames[0].sequence, frames[1].sequence]);
+    for item in &answered {
+        assert!(matches!(item.outcome, FrameOutcome::Result(_)), "{item:?}");
+    }
+    let ClientError::StreamBroken {
+        unanswered,
+        status: Some(e),
+    } = &broken
+    else {
+        panic!("{broken}")
+    };
+    assert_eq!(unanswered, &[frames[2].sequence]);
+    assert_eq!(e.code, tonic::Code::ResourceExhausted, "{e}");
+    assert_eq!(e.message, too_large_message(over, limit));
     server.stop().await;
 }

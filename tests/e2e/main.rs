@@ -9,6 +9,7 @@ mod detect;
 mod errors;
 mod fusion;
 mod health_reflection;
+mod metrics;
 mod overload;
 mod security;
 mod shutdown;

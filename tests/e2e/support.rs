@@ -98,6 +98,11 @@ impl TestServer {
         }
     }
 
+    /// The `/metrics` address, when the config enables it.
+    pub fn metrics_addr(&self) -> Option<std::net::SocketAddr> {
+        self.running.as_ref()?.metrics_addr
+    }
+
     /// Client settings for this server (no retries, so tests see every refusal).
     pub fn client_config(&self) -> ClientConfig {
         let mut c = ClientConfig::new(self.url.clone());
