@@ -225,7 +225,7 @@ impl LandingClient {
                 Err(status) => {
                     let status = own_deadline(status, self.config.request_timeout, sent.elapsed());
                     let error = FrameError::from_status(&status);
-                    if !RetryPolicy::is_retryable(error.code) {
+                    if !RetryPolicy::is_retryable(error.code, error.retry_delay) {
                         return Err(self.status_error(&status));
                     }
                     if attempt >= policy.max_attempts.max(1) {

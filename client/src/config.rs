@@ -131,12 +131,16 @@ impl RetryPolicy {
         }
     }
 
-    /// Whether a call that failed with `code` may be sent again.
-    pub fn is_retryable(code: tonic::Code) -> bool {
-        matches!(
-            code,
-            tonic::Code::Unavailable | tonic::Code::ResourceExhausted
-        )
+    /// Whether a call that failed with `code` may be sent again: UNAVAILABLE, and
+    /// RESOURCE_EXHAUSTED when the server said when to retry (`retry_after`, its overload
+    /// refusals); a request over the server's size limit is RESOURCE_EXHAUSTED without one, and
+    /// sending it again cannot succeed.
+    pub fn is_retryable(code: tonic::Code, retry_after: Option<Duration>) -> bool {
+        match code {
+            tonic::Code::Unavailable => true,
+            tonic::Code::ResourceExhausted => retry_after.is_some(),
+            _ => false,
+        }
     }
 
     /// The wait before attempt `attempt + 1` (attempt counts from 1), given the server's request.
@@ -185,11 +189,25 @@ mod tests {
 
     #[test]
     fn only_overload_and_unavailable_are_retried() {
-        assert!(RetryPolicy::is_retryable(tonic::Code::Unavailable));
-        assert!(RetryPolicy::is_retryable(tonic::Code::ResourceExhausted));
-        assert!(!RetryPolicy::is_retryable(tonic::Code::InvalidArgument));
-        assert!(!RetryPolicy::is_retryable(tonic::Code::DeadlineExceeded));
-        assert!(!RetryPolicy::is_retryable(tonic::Code::Internal));
+        let later = Some(Duration::from_millis(50));
+        assert!(RetryPolicy::is_retryable(tonic::Code::Unavailable, None));
+        assert!(RetryPolicy::is_retryable(
+            tonic::Code::ResourceExhausted,
+            later
+        ));
+        assert!(!RetryPolicy::is_retryable(
+            tonic::Code::ResourceExhausted,
+            None
+        ));
+        assert!(!RetryPolicy::is_retryable(
+            tonic::Code::InvalidArgument,
+            later
+        ));
+        assert!(!RetryPolicy::is_retryable(
+            tonic::Code::DeadlineExceeded,
+            None
+        ));
+        assert!(!RetryPolicy::is_retryable(tonic::Code::Internal, None));
     }
 
     #[test]
