@@ -11,7 +11,7 @@
 //! scene does not constrain (a bare flat roof says nothing about heading) where the pose put
 //! them.
 
-use nalgebra::{Matrix3, Matrix6, SymmetricEigen, Vector3, Vector6};
+use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, UnitQuaternion, Vector3, Vector6};
 
 use crate::FusionMap;
 
@@ -66,14 +66,17 @@ pub struct Correction {
 impl Correction {
     /// Moves a world point by the correction.
     pub fn apply(&self, p: [f64; 3]) -> [f64; 3] {
-        let (r, t, s) = (self.rotation_matrix(), v(self.translation), v(self.pivot));
-        let q = r * (v(p) - s) + s + t;
+        let q = self.isometry() * nalgebra::Point3::from(v(p));
         [q.x, q.y, q.z]
     }
 
-    /// The rotation as a matrix.
-    pub fn rotation_matrix(&self) -> Matrix3<f64> {
-        nalgebra::Rotation3::from_scaled_axis(v(self.rotation)).into_inner()
+    /// The correction as a motion of the world: `pose' = isometry * pose` for every pose the
+    /// scan came with.
+    pub fn isometry(&self) -> Isometry3<f64> {
+        let rotation = UnitQuaternion::from_scaled_axis(v(self.rotation));
+        let pivot = v(self.pivot);
+        let shift = pivot + v(self.translation) - rotation * pivot;
+        Isometry3::from_parts(shift.into(), rotation)
     }
 
     /// Length of the translation, metres.

@@ -260,7 +260,7 @@ pub fn run_fused(
     let corrected;
     let frame = match &registration {
         Ok(correction) => {
-            corrected = moved(frame, &isometry(correction));
+            corrected = moved(frame, &correction.isometry());
             points = to_world_f64(&corrected.cloud);
             &corrected
         }
@@ -271,13 +271,11 @@ pub fn run_fused(
     let t = frame.cloud.pose.translation.vector;
     let map_start = Instant::now();
     let reset = map.insert(Scan {
-        drone_id: &frame.drone_id,
-        time_s,
         sensor: [t.x, t.y, t.z],
         points: &points,
         classes: c.classes.as_deref(),
         keep_out: c.obstacles.take(),
-        reset,
+        ..scan
     });
     let landable = &options.params.landable_classes;
     // The answer covers everything the map holds: what the approach has scanned of the roof
@@ -305,14 +303,6 @@ pub fn run_fused(
     let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
     out.fusion = Some(summary);
     Ok(out)
-}
-
-/// The rigid motion a registration's correction describes, as an isometry of the world.
-fn isometry(c: &Correction) -> Isometry3<f64> {
-    let rotation = UnitQuaternion::from_scaled_axis(Vector3::from(c.rotation));
-    let pivot = Vector3::from(c.pivot);
-    let shift = pivot + Vector3::from(c.translation) - rotation * pivot;
-    Isometry3::from_parts(shift.into(), rotation)
 }
 
 /// `frame` with every pose it carries (LiDAR, camera, class camera) moved by `by`.
