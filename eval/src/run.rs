@@ -599,7 +599,7 @@ mod tests {
             ..Default::default()
         };
         let ms = step_times_ms(Some(&t));
-        assert_eq!(ms[9], Some(2.5));
+        assert_eq!(ms[STEPS.len() - 1], Some(2.5), "total is the last step");
         assert_eq!(ms[0], None);
     }
 }
