@@ -850,18 +850,18 @@ pub fn result_json(r: &FrameResult) -> Value {
             .map(|d| d.as_secs_f64() * 1e3)
     };
     let t = r.timings.unwrap_or_default();
+    let timings: serde_json::Map<String, Value> = landing_proto::STAGES
+        .iter()
+        .zip(t.by_stage())
+        .map(|(name, d)| (name.to_string(), json!(ms(d))))
+        .collect();
     json!({
         "drone_id": r.drone_id,
         "sequence": r.sequence,
         "segmentation_mode": segmentation_name(r.segmentation_mode),
         "point_count": r.point_count,
         "triangle_count": r.triangle_count,
-        "timings_ms": {
-            "queue": ms(t.queue), "decode": ms(t.decode), "segmentation": ms(t.segmentation),
-            "classification": ms(t.classification), "fusion": ms(t.fusion), "triangulation": ms(t.triangulation),
-            "triangle_filter": ms(t.triangle_filter), "plane_extraction": ms(t.plane_extraction),
-            "polygon_extraction": ms(t.polygon_extraction), "polylabel": ms(t.polylabel), "total": ms(t.total),
-        },
+        "timings_ms": timings,
         "sites": r.sites.iter().map(site_json).collect::<Vec<_>>(),
         "fusion": r.fusion.as_ref().map(|f| json!({
             "frames": f.frames, "points": f.points, "cells": f.cells,

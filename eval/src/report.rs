@@ -56,19 +56,7 @@ impl Mode {
 }
 
 /// The pipeline steps the server times, in pipeline order.
-pub const STEPS: [&str; 11] = [
-    "queue",
-    "decode",
-    "segmentation",
-    "classification",
-    "fusion",
-    "triangulation",
-    "triangle_filter",
-    "plane_extraction",
-    "polygon_extraction",
-    "polylabel",
-    "total",
-];
+pub use landing_proto::STAGES as STEPS;
 
 /// One frame processed in one mode, alone or as part of its approach's fused stream.
 #[derive(Debug, Clone, PartialEq, Serialize)]

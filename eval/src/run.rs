@@ -136,23 +136,13 @@ pub fn step_times_ms(t: Option<&StageTimings>) -> Vec<Option<f64>> {
     let Some(t) = t else {
         return vec![None; STEPS.len()];
     };
-    let ms = |d: &Option<prost_types::Duration>| {
-        d.and_then(landing_client::duration_from_proto)
-            .map(|d: Duration| d.as_secs_f64() * 1e3)
-    };
-    vec![
-        ms(&t.queue),
-        ms(&t.decode),
-        ms(&t.segmentation),
-        ms(&t.classification),
-        ms(&t.fusion),
-        ms(&t.triangulation),
-        ms(&t.triangle_filter),
-        ms(&t.plane_extraction),
-        ms(&t.polygon_extraction),
-        ms(&t.polylabel),
-        ms(&t.total),
-    ]
+    t.by_stage()
+        .iter()
+        .map(|d| {
+            d.and_then(landing_client::duration_from_proto)
+                .map(|d: Duration| d.as_secs_f64() * 1e3)
+        })
+        .collect()
 }
 
 /// Scores one single-frame answer against the frame's truth.

@@ -4,7 +4,8 @@
 //! ([`v1::Frame`], [`v1::FrameResult`], [`v1::LandingSite`], ...), the tonic client and server
 //! stubs ([`v1::landing_service_client`], [`v1::landing_service_server`]), the `google.rpc` status
 //! and error-detail messages the API sends, and the encoded [`FILE_DESCRIPTOR_SET`] used by server
-//! reflection and by MCAP recordings as their schema. It holds no logic.
+//! reflection and by MCAP recordings as their schema, and [`STAGES`], the names of
+//! [`v1::StageTimings`]'s steps with their fields in that order. It holds no other logic.
 //!
 //! ```
 //! use landing_proto::v1::{SemanticClass, PipelineOptions};
@@ -41,5 +42,40 @@ pub mod google {
 }
 
 /// The encoded `google.protobuf.FileDescriptorSet` of every `.proto` file of the API, with imports.
+/// The steps of [`v1::StageTimings`], by field name, in pipeline order (`queue` first, `total`
+/// last): the one list the server's metrics, the command line's JSON and the evaluation use.
+pub const STAGES: [&str; 11] = [
+    "queue",
+    "decode",
+    "segmentation",
+    "classification",
+    "fusion",
+    "triangulation",
+    "triangle_filter",
+    "plane_extraction",
+    "polygon_extraction",
+    "polylabel",
+    "total",
+];
+
+impl v1::StageTimings {
+    /// Each step's time, in [`STAGES`] order.
+    pub fn by_stage(&self) -> [Option<prost_types::Duration>; 11] {
+        [
+            self.queue,
+            self.decode,
+            self.segmentation,
+            self.classification,
+            self.fusion,
+            self.triangulation,
+            self.triangle_filter,
+            self.plane_extraction,
+            self.polygon_extraction,
+            self.polylabel,
+            self.total,
+        ]
+    }
+}
+
 pub const FILE_DESCRIPTOR_SET: &[u8] =
     include_bytes!(concat!(env!("OUT_DIR"), "/landing_descriptor.bin"));

@@ -34,21 +34,8 @@ pub struct StageTimings {
     pub total: Option<Duration>,
 }
 
-/// Every step's name, as [`StageTimings::named`] gives them, in pipeline order: the
-/// `landing.v1.StageTimings` field names, one list for the JSON output and the metrics alike.
-pub const STAGES: [&str; 11] = [
-    "queue",
-    "decode",
-    "segmentation",
-    "classification",
-    "fusion",
-    "triangulation",
-    "triangle_filter",
-    "plane_extraction",
-    "polygon_extraction",
-    "polylabel",
-    "total",
-];
+/// Every step's name, as [`StageTimings::named`] gives them, in pipeline order.
+pub use landing_proto::STAGES;
 
 impl StageTimings {
     /// The steps that ran, by their names in [`STAGES`], in pipeline order (`queue` first,
