@@ -255,12 +255,39 @@ pub struct Fused {
     pub classes: Option<Vec<u8>>,
 }
 
+/// The centre of the bounding box of the finite `points`, or `fallback` when none is: a local
+/// origin near the points wherever the world origin is, so that coordinates relative to it stay
+/// small enough for single precision.
+pub fn centre(points: &[[f64; 3]], fallback: [f64; 3]) -> [f64; 3] {
+    let mut bounds: Option<([f64; 3], [f64; 3])> = None;
+    for p in points.iter().filter(|p| p.iter().all(|v| v.is_finite())) {
+        let (lo, hi) = bounds.get_or_insert((*p, *p));
+        for i in 0..3 {
+            lo[i] = lo[i].min(p[i]);
+            hi[i] = hi[i].max(p[i]);
+        }
+    }
+    bounds.map_or(fallback, |(lo, hi)| {
+        std::array::from_fn(|i| lo[i] + (hi[i] - lo[i]) / 2.0)
+    })
+}
+
+/// The origin a map takes from its first scan: the cell corner nearest the [`centre`] of its
+/// points on the grid of cells through the sensor, so that where cell boundaries fall depends
+/// only on where the sensor was (as with the sensor itself as the origin), while the origin
+/// lies among the points even when a cloud came in world coordinates with the sensor at 0.
+fn anchor<K>(scan: &Scan<'_, K>, cell: f64) -> [f64; 3] {
+    let c = centre(scan.points, scan.sensor);
+    std::array::from_fn(|i| scan.sensor[i] + ((c[i] - scan.sensor[i]) / cell).round() * cell)
+}
+
 /// A stream's map (see the crate docs).
 #[derive(Debug)]
 pub struct FusionMap<K> {
     params: FusionParams,
-    /// World position of cell (0, 0, 0)'s corner: the first scan's sensor, so that cell
-    /// coordinates stay small wherever the world origin is.
+    /// World position of cell (0, 0, 0)'s corner: near the [`centre`] of the first scan's
+    /// points, so that cell coordinates stay small wherever the world origin is (see
+    /// [`anchor`]).
     origin: Option<[f64; 3]>,
     cells: HashMap<[i32; 3], Cell, BuildHasherDefault<CellHasher>>,
     /// (time, footprints), oldest first; the last is the newest frame's.
@@ -379,7 +406,8 @@ impl<K> FusionMap<K> {
         }
         self.drone_id.clear();
         self.drone_id.push_str(scan.drone_id);
-        let origin = *self.origin.get_or_insert(scan.sensor);
+        let cell = self.params.cell_m;
+        let origin = *self.origin.get_or_insert_with(|| anchor(&scan, cell));
         if self.last.is_none() {
             self.start_s = scan.time_s;
         }
@@ -471,6 +499,17 @@ impl<K> FusionMap<K> {
     /// size only their owner knows.
     pub fn cell_bytes(&self) -> usize {
         self.cells.capacity() * (std::mem::size_of::<([i32; 3], Cell)>() + 1)
+    }
+
+    /// The world position the map's coordinates are relative to once `scan` is inserted: its
+    /// origin, or one near the [`centre`] of the scan's points when the map is empty or `scan`
+    /// would start it over. The caller can compute the frame in the same local coordinates the map answers
+    /// in, so that every frame since the start shares them.
+    pub fn origin_for(&self, scan: &Scan<'_, K>) -> [f64; 3] {
+        match self.origin {
+            Some(origin) if self.would_reset(scan).is_none() => origin,
+            _ => anchor(scan, self.params.cell_m),
+        }
     }
 
     /// Why [`FusionMap::insert`]ing `scan` would start the map over, if it would (only the

@@ -323,3 +323,37 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn the_origin_lies_among_the_first_scans_points_and_holds_until_a_reset() {
+    // A cloud in world coordinates far from the world origin, with the sensor reported at 0.
+    let far = roof([4.0e6, -3.0e6, 100.0]);
+    let classes = vec![ROOFTOP; far.len()];
+    let first = Scan {
+        sensor: [0.0; 3],
+        ..scan(0.0, &far, &classes)
+    };
+    let mut m = map();
+    let origin = m.origin_for(&first);
+    let centre = landing_fusion::centre(&far, [0.0; 3]);
+    let cell = FusionParams::default().cell_m;
+    assert!(
+        (0..3).all(|i| (origin[i] - centre[i]).abs() <= cell / 2.0 + 1e-6),
+        "{origin:?}"
+    );
+    m.insert(first.clone());
+    let next = Scan {
+        time_s: 0.1,
+        ..first.clone()
+    };
+    assert_eq!(m.origin_for(&next), origin, "the map keeps its origin");
+    let near = roof([0.0; 3]);
+    let restart = Scan {
+        reset: true,
+        points: &near,
+        ..next
+    };
+    let moved = m.origin_for(&restart);
+    assert!(moved[0].abs() < 20.0 && moved[1].abs() < 20.0, "{moved:?}");
+    assert!(landing_fusion::centre(&[], [1.0, 2.0, 3.0]) == [1.0, 2.0, 3.0]);
+}

@@ -352,7 +352,7 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
             );
             return None;
         }
-        points.push([v[0] as f32, v[1] as f32, v[2] as f32]);
+        points.push(v);
         if let (Some(o), Some(classes)) = (class_offset, classes.as_mut()) {
             let class = p[o];
             if class > MAX_CLASS {

@@ -25,7 +25,7 @@ pub fn detect_ply(
         sequence: 0,
         timestamp: None,
         cloud: Cloud {
-            points: cloud.points,
+            points: cloud.points.iter().map(|p| p.map(f64::from)).collect(),
             classes: cloud.classes,
             pose: Isometry3::identity(),
         },

@@ -28,7 +28,9 @@ pub enum SegmentationMode {
 /// A validated LiDAR scan: points in the LiDAR frame and the pose `T_world_lidar`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Cloud {
-    pub points: Vec<[f32; 3]>,
+    /// In double precision: a cloud sent already in world coordinates (identity pose, FLOAT64
+    /// fields) keeps its millimetres at 1e7 m.
+    pub points: Vec<[f64; 3]>,
     /// One [`landing_geometry::SemanticClass`] number per point, when the cloud has a class field.
     pub classes: Option<Vec<u8>>,
     pub pose: Isometry3<f64>,

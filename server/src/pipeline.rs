@@ -193,18 +193,26 @@ impl Pipeline {
 
 /// Runs the whole pipeline on one frame: classes (per the mode), world transform, geometry,
 /// and world/geodetic results. Blocking and CPU-bound: call it from a worker thread.
+///
+/// Everything between the request and the answer runs in frame-local coordinates (the world
+/// moved so that the cloud's bounding-box centre is the origin): the geometry's single-precision
+/// points keep their millimetres wherever the world origin is, up to the API's 1e7 m.
 pub fn run_pipeline(
     frame: &Frame,
     options: &FrameOptions,
     pipeline: &Pipeline,
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
-    let c = classify(frame, to_world(&frame.cloud), options, pipeline)?;
+    let world = to_world(&frame.cloud);
+    let origin = landing_fusion::centre(&world, frame.cloud.pose.translation.vector.into());
+    let local = moved(frame, &to_local(origin));
+    let c = classify(&local, relative_to(&world, origin), options, pipeline)?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
         world: &c.world,
         classes: c.classes.as_deref(),
         keep_out: &keep_out,
+        origin,
     };
     locate(frame, located, options, c.mode, c.timings, start)
 }
@@ -213,7 +221,8 @@ pub fn run_pipeline(
 /// stream's `map`, and the answer is computed from all the map's points (what the approach has
 /// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers.
 /// `reset` starts the map over first. A frame without a timestamp counts as taken at the
-/// previous frame's time.
+/// previous frame's time. The frame-local coordinates are the map's own (its origin), so that
+/// the keep-out footprints of every kept frame share them.
 pub fn run_fused(
     frame: &Frame,
     options: &FrameOptions,
@@ -222,17 +231,17 @@ pub fn run_fused(
     reset: bool,
 ) -> Result<FrameOutput, Error> {
     let start = Instant::now();
-    // The map bins in double precision; classification takes the same points as `to_world` gives.
-    let mut points = to_world_f64(&frame.cloud);
+    // The map bins in double precision.
+    let mut points = to_world(&frame.cloud);
     let time_s = frame
         .timestamp
         .map(|t| t.seconds as f64 + f64::from(t.nanos) * 1e-9)
         .or(map.last_time_s())
         .unwrap_or(0.0);
-    let s = frame.cloud.pose.translation.vector;
+    let mut sensor = Point3::from(frame.cloud.pose.translation.vector);
     let scan = Scan {
         time_s,
-        sensor: [s.x, s.y, s.z],
+        sensor: sensor.into(),
         reset,
         ..Scan::new(&frame.drone_id)
     };
@@ -244,22 +253,25 @@ pub fn run_fused(
         None => map.register(&points, scan.sensor),
     };
     let mut fusion_time = start.elapsed();
-    let corrected;
-    let frame = match &registration {
-        Ok(correction) => {
-            corrected = moved(frame, &correction.isometry());
-            points = to_world_f64(&corrected.cloud);
-            &corrected
+    let correction = registration
+        .as_ref()
+        .map_or_else(|_| Isometry3::identity(), Correction::isometry);
+    if registration.is_ok() {
+        for p in &mut points {
+            *p = (correction * Point3::from(*p)).into();
         }
-        Err(_) => frame,
+        sensor = correction * sensor;
+    }
+    let scan = Scan {
+        sensor: sensor.into(),
+        points: &points,
+        ..scan
     };
-    let world = points.iter().map(|p| p.map(|v| v as f32)).collect();
-    let mut c = classify(frame, world, options, pipeline)?;
-    let t = frame.cloud.pose.translation.vector;
+    let origin = map.origin_for(&scan);
+    let local = moved(frame, &(to_local(origin) * correction));
+    let mut c = classify(&local, relative_to(&points, origin), options, pipeline)?;
     let map_start = Instant::now();
     let reset = map.insert(Scan {
-        sensor: [t.x, t.y, t.z],
-        points: &points,
         classes: c.classes.as_deref(),
         keep_out: c.obstacles.take(),
         ..scan
@@ -270,7 +282,7 @@ pub fn run_fused(
     // as the drone descends.
     let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
     let fused = map.fused(everything, |class| landable.contains(&class));
-    let world: Vec<[f32; 3]> = fused.points.iter().map(|p| p.map(|v| v as f32)).collect();
+    let world = relative_to(&fused.points, origin);
     fusion_time += map_start.elapsed();
     c.timings.fusion = Some(fusion_time);
     let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
@@ -286,10 +298,24 @@ pub fn run_fused(
         world: &world,
         classes: fused.classes.as_deref(),
         keep_out: &keep_out,
+        origin,
     };
     let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
     out.fusion = Some(summary);
     Ok(out)
+}
+
+/// The move from world coordinates to those relative to `origin`.
+fn to_local(origin: [f64; 3]) -> Isometry3<f64> {
+    Isometry3::translation(-origin[0], -origin[1], -origin[2])
+}
+
+/// `points` relative to `origin`, in the single precision the geometry takes.
+fn relative_to(points: &[[f64; 3]], origin: [f64; 3]) -> Vec<[f32; 3]> {
+    points
+        .iter()
+        .map(|p| std::array::from_fn(|i| (p[i] - origin[i]) as f32))
+        .collect()
 }
 
 /// `frame` with every pose it carries (LiDAR, camera, class camera) moved by `by`.
@@ -304,7 +330,7 @@ fn moved(frame: &Frame, by: &Isometry3<f64>) -> Frame {
 
 /// A frame's points with their classes, before geometry.
 struct Classified {
-    /// The cloud in the world frame.
+    /// The cloud in frame-local coordinates.
     world: Vec<[f32; 3]>,
     classes: Option<Vec<u8>>,
     /// The class mask's obstacle pixels, when a mask classified the points.
@@ -313,8 +339,8 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points (`world`: the cloud in the world frame)
-/// per the mode.
+/// Decodes the frame's images and classifies its points (`world`: the cloud in the coordinates
+/// the frame's poses give, frame-local ones from the callers above) per the mode.
 fn classify(
     frame: &Frame,
     world: Vec<[f32; 3]>,
@@ -375,15 +401,17 @@ fn classify(
     })
 }
 
-/// What the geometry runs on: world points, their classes, and the obstacle rays whose
-/// footprints safe circles keep clear of.
+/// What the geometry runs on: frame-local points, their classes, the obstacle rays whose
+/// footprints safe circles keep clear of (in the same coordinates), and the world position of
+/// their origin.
 struct Located<'a> {
     world: &'a [[f32; 3]],
     classes: Option<&'a [u8]>,
     keep_out: &'a [&'a ObstacleRays],
+    origin: [f64; 3],
 }
 
-/// The geometry on classified world points, and the world/geodetic results.
+/// The geometry on classified frame-local points, and the world/geodetic results.
 fn locate(
     frame: &Frame,
     input: Located<'_>,
@@ -396,6 +424,7 @@ fn locate(
         world,
         classes,
         keep_out,
+        origin,
     } = input;
 
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
@@ -424,15 +453,21 @@ fn locate(
         .sites
         .iter()
         .map(|s| {
-            let z = s.plane_height_m;
-            let ring = |r: &[[f64; 2]]| r.iter().map(|p| [p[0], p[1], z]).collect::<Vec<_>>();
+            let [x0, y0, z0] = origin;
+            let z = s.plane_height_m + z0;
+            let ring = |r: &[[f64; 2]]| {
+                r.iter()
+                    .map(|p| [p[0] + x0, p[1] + y0, z])
+                    .collect::<Vec<_>>()
+            };
+            let center = std::array::from_fn(|i| s.center[i] + origin[i]);
             Site {
                 rank: s.rank,
                 shell: ring(&s.polygon.shell),
                 holes: s.polygon.holes.iter().map(|h| ring(h)).collect(),
                 plane_height_m: z,
-                center: s.center,
-                center_geodetic: frame.geodetic_origin.map(|o| enu_to_geodetic(o, s.center)),
+                center,
+                center_geodetic: frame.geodetic_origin.map(|o| enu_to_geodetic(o, center)),
                 safe_radius_m: s.safe_radius_m,
                 area_m2: s.area_m2,
                 normal: s.normal,
@@ -456,29 +491,11 @@ fn locate(
 }
 
 /// The cloud's points in the world frame, in double precision.
-fn to_world_f64(cloud: &Cloud) -> Vec<[f64; 3]> {
+pub fn to_world(cloud: &Cloud) -> Vec<[f64; 3]> {
     cloud
         .points
         .iter()
-        .map(|p| {
-            let w = cloud.pose * Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-            [w.x, w.y, w.z]
-        })
-        .collect()
-}
-
-/// The cloud's points moved to the world frame by its pose (skipped for the identity).
-pub fn to_world(cloud: &Cloud) -> Vec<[f32; 3]> {
-    if cloud.pose == Isometry3::identity() {
-        return cloud.points.clone();
-    }
-    cloud
-        .points
-        .iter()
-        .map(|p| {
-            let w = cloud.pose * Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
-            [w.x as f32, w.y as f32, w.z as f32]
-        })
+        .map(|&p| (cloud.pose * Point3::from(p)).into())
         .collect()
 }
 
@@ -501,7 +518,7 @@ pub fn pose(position: [f64; 3], quaternion: [f64; 4]) -> Option<Isometry3<f64>> 
 mod tests {
     use super::*;
 
-    fn frame(points: Vec<[f32; 3]>, classes: Option<Vec<u8>>) -> Frame {
+    fn frame(points: Vec<[f64; 3]>, classes: Option<Vec<u8>>) -> Frame {
         Frame {
             drone_id: "d1".into(),
             sequence: 7,
@@ -536,7 +553,7 @@ mod tests {
         };
         let w = to_world(&cloud)[0];
         assert!(
-            (w[0] - 10.0).abs() < 1e-5 && (w[1] - 1.0).abs() < 1e-5 && (w[2] - 5.0).abs() < 1e-5,
+            (w[0] - 10.0).abs() < 1e-12 && (w[1] - 1.0).abs() < 1e-12 && (w[2] - 5.0).abs() < 1e-12,
             "{w:?}"
         );
     }

@@ -11,6 +11,7 @@ mod fusion;
 mod health_reflection;
 mod metrics;
 mod overload;
+mod precision;
 mod security;
 mod shutdown;
 mod stream;
