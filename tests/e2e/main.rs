@@ -9,6 +9,7 @@ mod detect;
 mod errors;
 mod fusion;
 mod health_reflection;
+mod malformed;
 mod metrics;
 mod overload;
 mod precision;
