@@ -66,4 +66,21 @@ kill -TERM "$server_pid"; wait "$server_pid"; server_pid=""
 step "deployment: manifests, container recipes, shipped config, serving the sample with it"
 LANDING_BIN_DIR="$bin" bash deploy/check.sh
 
+step "fuzz smoke: every cargo-fuzz target, 20 000 runs from its seed corpus, seeded (RELIABILITY.md)"
+command -v cargo-fuzz >/dev/null || cargo install --locked cargo-fuzz@0.13.2
+(
+  cd fuzz
+  # libFuzzer's coverage instrumentation only (-s none): address sanitizing needs a nightly compiler.
+  cargo fuzz build -s none
+  for target in $(cargo fuzz list); do
+    mkdir -p "$tmp/fuzz/$target"
+    log="$tmp/fuzz/$target.log"
+    if ! cargo fuzz run -s none "$target" "$tmp/fuzz/$target" "corpus/$target" -- \
+      -seed=1 -runs="${FUZZ_RUNS:-20000}" -rss_limit_mb=2048 -timeout=10 >"$log" 2>&1; then
+      tail -n 60 "$log"; echo "fuzz target $target failed"; exit 1
+    fi
+    printf '%s: %s\n' "$target" "$(grep -E '^Done [0-9]+ runs' "$log")"
+  done
+)
+
 printf '\nall checks passed\n'

@@ -30,7 +30,20 @@ pub fn read(path: &Path) -> Result<Vec<RecordedFrame>, Error> {
 }
 
 /// Like [`read`], from the bytes of a whole file.
+///
+/// A malformed file is an error, never a panic: mcap 0.26 panics on some (an unchecked length
+/// addition in its record reader, found by the `recording` fuzz target; see RELIABILITY.md), so
+/// its parsing runs under `catch_unwind` and a panic becomes [`Error::Mcap`].
 pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
+    // Nothing outside the closure is touched: a panic leaves no half-updated state behind.
+    std::panic::catch_unwind(|| read_messages(bytes)).unwrap_or_else(|_| {
+        Err(Error::Mcap(
+            "malformed file: the MCAP reader gave up on a record length".into(),
+        ))
+    })
+}
+
+fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     let mut frames = Vec::new();
     let mut truths = BTreeMap::new();
     let mut labels = BTreeMap::new();

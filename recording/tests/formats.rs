@@ -143,3 +143,23 @@ fn written_results_read_back() {
     // A file of answers alone holds no frame to replay.
     assert!(matches!(read_bytes(&bytes), Err(Error::NoFrames)));
 }
+
+/// Found by the `recording` fuzz target: a record length that mcap 0.26 adds to without a check
+/// (it panicked with "attempt to add with overflow"). Reading it is an error, not a panic.
+#[test]
+fn a_record_length_near_the_integer_limit_is_an_error_not_a_panic() {
+    let bytes = include_bytes!("data/fuzz-mcap-record-length-overflow.mcap");
+    let err = landing_recording::read_bytes(bytes).unwrap_err();
+    assert!(err.to_string().contains("MCAP"), "{err}");
+}
+
+/// Found by the `ply` fuzz target: a binary file whose header claims up to 2^31 rows of an
+/// element with no properties, which the reader counted through one by one (minutes). Rows of
+/// no bytes are now skipped, so the file is answered at once.
+#[test]
+fn rows_of_no_properties_are_not_counted_one_by_one() {
+    let bytes = include_bytes!("data/fuzz-ply-empty-rows.ply");
+    let answer = landing_recording::ply::parse(bytes);
+    let points = answer.map(|c| c.points.len()).map_err(|e| e.to_string());
+    assert_eq!(points, Ok(0), "{points:?}");
+}
