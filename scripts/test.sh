@@ -3,7 +3,8 @@
 # gRPC with the real model and real recordings), then the cross-language and deployment checks:
 # the Python MCAP reader, the segmentation smoke train + ONNX parity check, a Python grpcio client
 # and the stock Python reflection client,
-# the evaluation slice, single-frame and fused (fails on any unsafe site), and the deploy manifests/config/serve check.
+# the evaluation slice, single-frame and fused (fails on any unsafe site), the deploy manifests/config/serve check,
+# and a seeded smoke run of every cargo-fuzz target (RELIABILITY.md).
 # Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
 # models/training/smoke.sh, deploy in deploy/check.sh.
 set -euo pipefail
