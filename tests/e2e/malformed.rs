@@ -151,21 +151,11 @@ const CASES: &[Case] = &[
     },
     Case {
         field: "frame.point_cloud.timestamp.nanos",
-        spoil: |f, _| {
-            cloud(f).timestamp = Some(prost_types::Timestamp {
-                seconds: 1,
-                nanos: -1,
-            })
-        },
+        spoil: |f, _| cloud(f).timestamp = timestamp(1, -1),
     },
     Case {
         field: "frame.timestamp.nanos",
-        spoil: |f, _| {
-            f.timestamp = Some(prost_types::Timestamp {
-                seconds: 1,
-                nanos: 2_000_000_000,
-            })
-        },
+        spoil: |f, _| f.timestamp = timestamp(1, 2_000_000_000),
     },
     // The camera image.
     Case {
@@ -205,12 +195,7 @@ const CASES: &[Case] = &[
     },
     Case {
         field: "frame.image.timestamp.nanos",
-        spoil: |f, _| {
-            image(f).timestamp = Some(prost_types::Timestamp {
-                seconds: 0,
-                nanos: -5,
-            })
-        },
+        spoil: |f, _| image(f).timestamp = timestamp(0, -5),
     },
     Case {
         field: "frame.image.image",
@@ -359,6 +344,10 @@ const CASES: &[Case] = &[
         },
     },
 ];
+
+fn timestamp(seconds: i64, nanos: i32) -> Option<prost_types::Timestamp> {
+    Some(prost_types::Timestamp { seconds, nanos })
+}
 
 fn pose_position(f: &mut Frame, change: fn(&mut v1::Vector3)) {
     let pose = cloud(f).pose.get_or_insert_with(Default::default);
