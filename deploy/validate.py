@@ -72,7 +72,12 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "max_request_bytes": int,
         "shutdown_grace_s": (int, float),
     },
-    "pipeline": {"geometry_workers": int, "queue_capacity": int, "stream_buffer": int},
+    "pipeline": {
+        "geometry_workers": int,
+        "queue_capacity": int,
+        "max_queued_bytes": int,
+        "stream_buffer": int,
+    },
     "segmentation": {
         "enabled": bool,
         "model_path": str,

@@ -25,6 +25,16 @@ pub fn ring_signed_area(ring: &[[f64; 2]]) -> f64 {
     a / 2.0
 }
 
+/// True when every vertex of `ring` lies on one line, exactly: a ring of distinct vertices has
+/// zero area only then. The shoelace sum cannot answer this: coordinates of very different
+/// magnitudes (1e-41 beside 1e-23, found by fuzzing) round a real, tiny area to 0.
+fn ring_is_collinear(ring: &[[f64; 2]]) -> bool {
+    let [a, b] = [ring[0], ring[1]];
+    ring[2..]
+        .iter()
+        .all(|&p| robust::orient2d(coord(a), coord(b), coord(p)) == 0.0)
+}
+
 /// Where a point lies relative to a ring.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Location {
@@ -90,7 +100,7 @@ pub fn check_polygon(polygon: &Polygon) -> Result<(), GeometryError> {
         if let Some(w) = sorted.windows(2).find(|w| w[0] == w[1]) {
             return bad(format!("{name} repeats vertex {:?}", w[0]));
         }
-        if ring_signed_area(ring) == 0.0 {
+        if ring_is_collinear(ring) {
             return bad(format!("{name} has zero area"));
         }
         let ccw = ring_is_ccw(ring);
@@ -418,6 +428,13 @@ mod tests {
                 },
             ),
             (
+                "collinear hole",
+                Polygon {
+                    shell: square(0.0, 0.0, 10.0),
+                    holes: vec![vec![[1.0, 1.0], [3.0, 3.0], [2.0, 2.0]]],
+                },
+            ),
+            (
                 "NaN",
                 Polygon {
                     shell: vec![[0.0, 0.0], [1.0, f64::NAN], [0.0, 1.0]],
@@ -428,6 +445,23 @@ mod tests {
         for (name, p) in cases {
             assert!(check_polygon(&p).is_err(), "{name} passed");
         }
+    }
+
+    #[test]
+    fn a_tiny_hole_of_mixed_magnitudes_is_valid() {
+        // Exact area about 1e-31 m²; the shoelace sum rounds it to 0 (the `detect` fuzz find).
+        let hole = vec![
+            [-2.7296960214249913e-23, 1.1094379637199836e-8],
+            [2.263517409423877e-41, 3.073364496231079e-8],
+            [0.0, 4.17230836546878e-8],
+            [2.274307407599178e-41, 3.073364496231079e-8],
+        ];
+        assert_eq!(ring_signed_area(&hole), 0.0);
+        let p = Polygon {
+            shell: square(-1.0, -1.0, 2.0),
+            holes: vec![hole],
+        };
+        check_polygon(&p).expect("a valid polygon");
     }
 
     #[test]

@@ -110,6 +110,10 @@ pub struct PipelineConfig {
     pub geometry_workers: u32,
     /// Frames admitted but not yet finished, all streams together.
     pub queue_capacity: u32,
+    /// Memory those frames may hold together, bytes: their points (8 bytes a coordinate),
+    /// classes and image bytes. A frame over it is refused like one over `queue_capacity`; a
+    /// frame larger than the whole budget is admitted only into an empty queue.
+    pub max_queued_bytes: u64,
     /// Frames buffered per stream before the overflow policy applies.
     pub stream_buffer: u32,
 }
@@ -119,6 +123,7 @@ impl Default for PipelineConfig {
         Self {
             geometry_workers: 0,
             queue_capacity: 64,
+            max_queued_bytes: 512 * 1024 * 1024,
             stream_buffer: 4,
         }
     }
@@ -329,6 +334,12 @@ impl Config {
             return Err(Error::config(
                 "pipeline.queue_capacity",
                 format!("{} is outside 1..=1000000", p.queue_capacity),
+            ));
+        }
+        if !(1 << 20..=1 << 40).contains(&p.max_queued_bytes) {
+            return Err(Error::config(
+                "pipeline.max_queued_bytes",
+                format!("{} is outside 1 MiB..=1 TiB", p.max_queued_bytes),
             ));
         }
         if !(1..=10_000).contains(&p.stream_buffer) {
@@ -594,9 +605,10 @@ mod tests {
             (
                 c.pipeline.geometry_workers,
                 c.pipeline.queue_capacity,
+                c.pipeline.max_queued_bytes,
                 c.pipeline.stream_buffer
             ),
-            (0, 64, 4)
+            (0, 64, 512 << 20, 4)
         );
         assert_eq!(
             c.segmentation.model_path,
@@ -691,6 +703,10 @@ mod tests {
             (
                 "[pipeline]\nqueue_capacity = 0\n",
                 "pipeline.queue_capacity",
+            ),
+            (
+                "[pipeline]\nmax_queued_bytes = 1000\n",
+                "pipeline.max_queued_bytes",
             ),
             (
                 "[pipeline]\ngeometry_workers = -1\n",

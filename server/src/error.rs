@@ -41,9 +41,9 @@ pub enum Error {
     #[error("geometry: {0}")]
     Geometry(GeometryError),
     /// Admission control: the server is at capacity; retry after the given delay.
-    #[error("server at capacity ({capacity} frames in flight); retry in {retry_after:?}")]
+    #[error("server at capacity ({capacity}); retry in {retry_after:?}")]
     Overloaded {
-        capacity: usize,
+        capacity: Capacity,
         retry_after: Duration,
     },
     /// A request message is larger than `server.max_request_bytes`; resending it cannot succeed.
@@ -119,4 +119,22 @@ fn describe(violations: &[FieldViolation]) -> String {
         .map(|v| format!("`{}`: {}", v.field, v.description))
         .collect::<Vec<_>>()
         .join("; ")
+}
+
+/// The admission limit a refused frame met.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Capacity {
+    /// `pipeline.queue_capacity`: frames admitted and not finished.
+    Frames(usize),
+    /// `pipeline.max_queued_bytes`: the memory those frames hold.
+    Bytes(u64),
+}
+
+impl std::fmt::Display for Capacity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Frames(n) => write!(f, "{n} frames in flight, pipeline.queue_capacity"),
+            Self::Bytes(b) => write!(f, "{b} bytes of queued frames, pipeline.max_queued_bytes"),
+        }
+    }
 }

@@ -205,8 +205,13 @@ pub fn run_pipeline(
     let start = Instant::now();
     let world = to_world(&frame.cloud);
     let origin = landing_fusion::centre(&world, frame.cloud.pose.translation.vector.into());
-    let local = moved(frame, &to_local(origin));
-    let c = classify(&local, relative_to(&world, origin), options, pipeline)?;
+    let c = classify(
+        frame,
+        &to_local(origin),
+        relative_to(&world, origin),
+        options,
+        pipeline,
+    )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
         world: &c.world,
@@ -268,8 +273,8 @@ pub fn run_fused(
         ..scan
     };
     let origin = map.origin_for(&scan);
-    let local = moved(frame, &(to_local(origin) * correction));
-    let mut c = classify(&local, relative_to(&points, origin), options, pipeline)?;
+    let by = to_local(origin) * correction;
+    let mut c = classify(frame, &by, relative_to(&points, origin), options, pipeline)?;
     let map_start = Instant::now();
     let reset = map.insert(Scan {
         classes: c.classes.as_deref(),
@@ -318,16 +323,6 @@ fn relative_to(points: &[[f64; 3]], origin: [f64; 3]) -> Vec<[f32; 3]> {
         .collect()
 }
 
-/// `frame` with every pose it carries (LiDAR, camera, class camera) moved by `by`.
-fn moved(frame: &Frame, by: &Isometry3<f64>) -> Frame {
-    let mut f = frame.clone();
-    f.cloud.pose = by * f.cloud.pose;
-    for camera in [&mut f.image, &mut f.class_image].into_iter().flatten() {
-        camera.pose = by * camera.pose;
-    }
-    f
-}
-
 /// A frame's points with their classes, before geometry.
 struct Classified {
     /// The cloud in frame-local coordinates.
@@ -339,10 +334,12 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points (`world`: the cloud in the coordinates
-/// the frame's poses give, frame-local ones from the callers above) per the mode.
+/// Decodes the frame's images and classifies its points per the mode. `world` is the cloud in
+/// the coordinates the frame's poses give once moved by `by` (frame-local ones from the callers
+/// above); the frame itself is not copied.
 fn classify(
     frame: &Frame,
+    by: &Isometry3<f64>,
     world: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
@@ -372,7 +369,7 @@ fn classify(
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out = segmenter.classify(camera, rgb, &world, landable)?;
+            let out = segmenter.classify(camera, by * camera.pose, rgb, &world, landable)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
@@ -384,7 +381,8 @@ fn classify(
                     "class image mode without a class image".into(),
                 ));
             };
-            let out = segmentation::classify_with_mask(camera, mask, &world, landable);
+            let out =
+                segmentation::classify_with_mask(camera, by * camera.pose, mask, &world, landable);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
             Some(out.classes)

@@ -9,6 +9,7 @@ use landing_perception::{
     CameraModel, ClassMask, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
     SegmenterConfig, classify_points, decode_class_mask, decode_image,
 };
+use nalgebra::Isometry3;
 
 use crate::Error;
 use crate::config::SegmentationConfig;
@@ -117,6 +118,7 @@ impl Segmenter {
     pub fn classify(
         &self,
         camera: &CameraImage,
+        pose: Isometry3<f64>,
         image: &RgbImage,
         world_points: &[[f32; 3]],
         landable: &[u8],
@@ -135,7 +137,7 @@ impl Segmenter {
         let segmentation = t0.elapsed();
         Ok(Classified {
             segmentation,
-            ..classify_with_mask(camera, &mask, world_points, landable)
+            ..classify_with_mask(camera, pose, &mask, world_points, landable)
         })
     }
 }
@@ -148,8 +150,10 @@ fn obstacle_test(landable: &[u8]) -> impl Fn(u8) -> bool + '_ {
 
 /// Gives each world point the class of the pixel of `mask` (stretched over `camera`'s image) it
 /// projects to, and collects the rays of the obstacle pixels (classes outside `landable`).
+/// `pose` is the camera's in the coordinates of `world_points` (`camera.pose` moved with them).
 pub fn classify_with_mask(
     camera: &CameraImage,
+    pose: Isometry3<f64>,
     mask: &ClassMask,
     world_points: &[[f32; 3]],
     landable: &[u8],
@@ -157,7 +161,7 @@ pub fn classify_with_mask(
     let t = Instant::now();
     let k = camera.intrinsics;
     let model = CameraModel {
-        pose: camera.pose,
+        pose,
         fx: k.fx,
         fy: k.fy,
         cx: k.cx,

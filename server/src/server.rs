@@ -142,6 +142,7 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
     let dispatcher = Arc::new(Dispatcher::new(
         pipeline,
         config.pipeline.queue_capacity as usize,
+        config.pipeline.max_queued_bytes,
         workers,
         metrics.clone(),
     ));

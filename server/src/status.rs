@@ -134,6 +134,7 @@ mod tests {
 
     use super::*;
     use crate::FieldViolation;
+    use crate::error::Capacity;
 
     #[test]
     fn every_variant_has_its_code() {
@@ -153,7 +154,7 @@ mod tests {
             ),
             (
                 Error::Overloaded {
-                    capacity: 1,
+                    capacity: Capacity::Frames(1),
                     retry_after: Duration::from_millis(5),
                 },
                 Code::ResourceExhausted,
@@ -223,7 +224,7 @@ mod tests {
     #[test]
     fn overload_carries_retry_info() {
         let error = Error::Overloaded {
-            capacity: 4,
+            capacity: Capacity::Bytes(4 << 20),
             retry_after: Duration::from_millis(250),
         };
         let status = to_status(&error);

@@ -177,6 +177,11 @@ impl Metrics {
                 "landing_queue_depth",
                 "Frames admitted and not yet finished."
             );
+            metrics::describe_gauge!(
+                "landing_queue_bytes",
+                metrics::Unit::Bytes,
+                "Memory the admitted, unfinished frames hold (against pipeline.max_queued_bytes)."
+            );
             metrics::describe_gauge!("landing_in_flight", "Frames being computed on a worker.");
             metrics::describe_gauge!("landing_streams_open", "Open detection streams.");
             metrics::describe_gauge!(
@@ -212,6 +217,7 @@ impl Metrics {
             }
             for gauge in [
                 "landing_queue_depth",
+                "landing_queue_bytes",
                 "landing_in_flight",
                 "landing_streams_open",
                 "landing_fusion_maps_open",
@@ -249,10 +255,11 @@ impl Metrics {
         });
     }
 
-    /// Sets the queue-depth and in-flight gauges.
-    pub fn queue(&self, depth: usize, in_flight: usize) {
+    /// Sets the queue gauges: frames admitted, the memory they hold, frames computing.
+    pub fn queue(&self, depth: usize, bytes: usize, in_flight: usize) {
         self.with(|| {
             metrics::gauge!("landing_queue_depth").set(depth as f64);
+            metrics::gauge!("landing_queue_bytes").set(bytes as f64);
             metrics::gauge!("landing_in_flight").set(in_flight as f64);
         });
     }

@@ -7,10 +7,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use tokio::sync::Semaphore;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tracing::Instrument as _;
 
 use crate::Error;
+use crate::error::Capacity;
 use crate::pipeline::{
     Frame, FrameOptions, FrameOutput, Pipeline, StreamMap, run_fused, run_pipeline,
 };
@@ -74,6 +75,9 @@ impl Drop for StreamFusion {
 pub(crate) struct Dispatcher {
     pub pipeline: Arc<Pipeline>,
     admission: Arc<Semaphore>,
+    /// `pipeline.max_queued_bytes` in KiB permits: the memory admitted frames hold.
+    memory: Arc<Semaphore>,
+    memory_kib: u32,
     workers: Arc<Semaphore>,
     capacity: usize,
     worker_count: usize,
@@ -85,10 +89,21 @@ pub(crate) struct Dispatcher {
 }
 
 impl Dispatcher {
-    pub fn new(pipeline: Pipeline, capacity: usize, workers: usize, metrics: Metrics) -> Self {
+    /// `capacity` frames and `max_queued_bytes` of them admitted at a time, computed by
+    /// `workers` at a time.
+    pub fn new(
+        pipeline: Pipeline,
+        capacity: usize,
+        max_queued_bytes: u64,
+        workers: usize,
+        metrics: Metrics,
+    ) -> Self {
+        let memory_kib = u32::try_from(max_queued_bytes / 1024).unwrap_or(u32::MAX);
         Self {
             pipeline: Arc::new(pipeline),
             admission: Arc::new(Semaphore::new(capacity)),
+            memory: Arc::new(Semaphore::new(memory_kib as usize)),
+            memory_kib,
             workers: Arc::new(Semaphore::new(workers)),
             capacity,
             worker_count: workers,
@@ -121,8 +136,38 @@ impl Dispatcher {
     }
 
     fn gauges(&self) {
-        self.metrics
-            .queue(self.queued(), self.in_flight.load(Ordering::Relaxed));
+        let kib = self.memory_kib as usize - self.memory.available_permits();
+        self.metrics.queue(
+            self.queued(),
+            kib * 1024,
+            self.in_flight.load(Ordering::Relaxed),
+        );
+    }
+
+    /// Admits a frame against both limits, or says which one it met.
+    fn admit(&self, frame: &Frame) -> Result<Admitted, Error> {
+        let overloaded = |capacity| Error::Overloaded {
+            capacity,
+            retry_after: self.retry_after(),
+        };
+        let frames = self
+            .admission
+            .clone()
+            .try_acquire_owned()
+            .map_err(|_| overloaded(Capacity::Frames(self.capacity)))?;
+        // A frame larger than the whole budget takes all of it: it waits for an empty queue.
+        let kib = u32::try_from(held_bytes(frame).div_ceil(1024))
+            .unwrap_or(u32::MAX)
+            .clamp(1, self.memory_kib);
+        let memory = self
+            .memory
+            .clone()
+            .try_acquire_many_owned(kib)
+            .map_err(|_| overloaded(Capacity::Bytes(u64::from(self.memory_kib) * 1024)))?;
+        Ok(Admitted {
+            _frames: frames,
+            _memory: memory,
+        })
     }
 
     /// Processes one frame from validation result to outcome, counting it once.
@@ -145,13 +190,7 @@ impl Dispatcher {
         let admitted = match &parts {
             Err(_) => Ok(None),
             Ok(_) if self.is_draining() => Err(Error::ShuttingDown),
-            Ok(_) => match self.admission.clone().try_acquire_owned() {
-                Ok(permit) => Ok(Some(permit)),
-                Err(_) => Err(Error::Overloaded {
-                    capacity: self.capacity,
-                    retry_after: self.retry_after(),
-                }),
-            },
+            Ok((frame, _)) => self.admit(frame).map(Some),
         };
         self.gauges();
         let this = self.clone();
@@ -194,7 +233,7 @@ impl Dispatcher {
         self: &Arc<Self>,
         frame: Frame,
         options: FrameOptions,
-        admission: Option<tokio::sync::OwnedSemaphorePermit>,
+        admission: Option<Admitted>,
         when: When,
         superseded: impl Future<Output = u64>,
         mut fusion: Option<FusionTurn>,
@@ -284,6 +323,33 @@ impl Dispatcher {
     }
 }
 
+/// A frame's place in the queue: one of `pipeline.queue_capacity` and its share of
+/// `pipeline.max_queued_bytes`, given back when dropped.
+#[derive(Debug)]
+pub(crate) struct Admitted {
+    _frames: OwnedSemaphorePermit,
+    _memory: OwnedSemaphorePermit,
+}
+
+/// The memory a validated frame holds while queued: its points (f64), classes, the image bytes
+/// as received and its strings. Decoded pixels exist only while a worker computes it.
+fn held_bytes(frame: &Frame) -> usize {
+    let cloud = &frame.cloud;
+    let image = |i: &Option<crate::frame::CameraImage>| {
+        i.as_ref().map_or(0, |i| match &i.pixels {
+            crate::frame::ImagePixels::Encoded { data, .. }
+            | crate::frame::ImagePixels::Rgb8 { data, .. }
+            | crate::frame::ImagePixels::Mono8 { data, .. } => data.len(),
+        })
+    };
+    std::mem::size_of::<Frame>()
+        + cloud.points.len() * std::mem::size_of::<[f64; 3]>()
+        + cloud.classes.as_ref().map_or(0, Vec::len)
+        + image(&frame.image)
+        + image(&frame.class_image)
+        + frame.drone_id.len()
+}
+
 /// When a frame arrived and when its caller gives up on it.
 struct When {
     received: Instant,
@@ -308,5 +374,102 @@ impl<'a> InFlight<'a> {
 impl Drop for InFlight<'_> {
     fn drop(&mut self) {
         self.0.fetch_sub(1, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use nalgebra::Isometry3;
+
+    use super::*;
+    use crate::frame::Cloud;
+
+    /// A frame whose points hold about `kib` KiB.
+    fn frame_of(kib: usize) -> (Frame, FrameOptions) {
+        let points = vec![[0.0; 3]; kib * 1024 / 24];
+        let frame = Frame {
+            drone_id: "d1".into(),
+            sequence: 1,
+            timestamp: None,
+            cloud: Cloud {
+                points,
+                classes: None,
+                pose: Isometry3::identity(),
+            },
+            image: None,
+            class_image: None,
+            geodetic_origin: None,
+        };
+        (frame, FrameOptions::default())
+    }
+
+    fn dispatcher(capacity: usize, max_queued_bytes: u64) -> Arc<Dispatcher> {
+        let pipeline = Pipeline {
+            defaults: Default::default(),
+            segmenter: None,
+        };
+        Arc::new(Dispatcher::new(
+            pipeline,
+            capacity,
+            max_queued_bytes,
+            1,
+            Metrics::new(""),
+        ))
+    }
+
+    /// Admits (admission happens when `process` is called, not when its future runs).
+    fn admit(d: &Arc<Dispatcher>, kib: usize) -> impl Future<Output = Done> {
+        d.process(
+            Rpc::Stream,
+            Ok(frame_of(kib)),
+            None,
+            std::future::pending(),
+            None,
+        )
+    }
+
+    fn refusal(done: Done) -> Capacity {
+        match done {
+            Done::Failed(Error::Overloaded { capacity, .. }) => capacity,
+            other => panic!("expected an overload refusal, got {other:?}"),
+        }
+    }
+
+    #[tokio::test]
+    async fn admission_counts_frames_and_their_memory() {
+        let d = dispatcher(64, 1 << 20);
+        let first = admit(&d, 600);
+        assert_eq!(d.queued(), 1);
+        // 600 KiB are held; another 600 do not fit in 1 MiB, 300 do.
+        let second = admit(&d, 600);
+        assert_eq!(refusal(second.await), Capacity::Bytes(1 << 20));
+        let third = admit(&d, 300);
+        assert_eq!(d.queued(), 2);
+        // Finishing a frame gives its memory back.
+        drop(first);
+        let fourth = admit(&d, 600);
+        assert_eq!(d.queued(), 2);
+        drop((third, fourth));
+        assert_eq!(d.queued(), 0);
+        assert_eq!(d.memory.available_permits(), 1024);
+    }
+
+    #[tokio::test]
+    async fn a_frame_larger_than_the_budget_waits_for_an_empty_queue() {
+        let d = dispatcher(64, 1 << 20);
+        let small = admit(&d, 10);
+        assert_eq!(refusal(admit(&d, 4096).await), Capacity::Bytes(1 << 20));
+        drop(small);
+        let big = admit(&d, 4096);
+        assert_eq!(d.queued(), 1, "admitted alone");
+        assert_eq!(refusal(admit(&d, 1).await), Capacity::Bytes(1 << 20));
+        drop(big);
+    }
+
+    #[tokio::test]
+    async fn the_frame_limit_still_applies() {
+        let d = dispatcher(1, 1 << 30);
+        let _first = admit(&d, 1);
+        assert_eq!(refusal(admit(&d, 1).await), Capacity::Frames(1));
     }
 }

@@ -8,11 +8,12 @@ use landing_server::telemetry::scrape;
 use crate::support::{TestServer, mode, scene, server_config};
 
 /// Every metric and its Prometheus type.
-const METRICS: [(&str, &str); 9] = [
+const METRICS: [(&str, &str); 10] = [
     ("landing_frames_total", "counter"),
     ("landing_frame_seconds", "histogram"),
     ("landing_stage_seconds", "histogram"),
     ("landing_queue_depth", "gauge"),
+    ("landing_queue_bytes", "gauge"),
     ("landing_in_flight", "gauge"),
     ("landing_streams_open", "gauge"),
     ("landing_fusion_maps_open", "gauge"),
@@ -77,6 +78,7 @@ async fn every_metric_is_there_before_the_first_frame() {
     assert_eq!(value(&before, triangulation), Some(0.0), "{before}");
     for gauge in [
         "landing_queue_depth",
+        "landing_queue_bytes",
         "landing_in_flight",
         "landing_streams_open",
     ] {
