@@ -86,6 +86,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "sessions": int,
         "ort_library": str,
         "input_sizes": str,
+        "min_confidence": (int, float),
         "ort_log_level": str,
     },
     "auth": {"tokens_file": str},

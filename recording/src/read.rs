@@ -35,12 +35,53 @@ pub fn read(path: &Path) -> Result<Vec<RecordedFrame>, Error> {
 /// addition in its record reader, found by the `recording` fuzz target; see RELIABILITY.md), so
 /// its parsing runs under `catch_unwind` and a panic becomes [`Error::Mcap`].
 pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
+    check_chunk_sizes(bytes)?;
     // Nothing outside the closure is touched: a panic leaves no half-updated state behind.
     std::panic::catch_unwind(|| read_messages(bytes)).unwrap_or_else(|_| {
         Err(Error::Mcap(
             "malformed file: the MCAP reader gave up on a record length".into(),
         ))
     })
+}
+
+/// The largest uncompressed chunk a recording may declare. mcap 0.26 reserves a chunk's
+/// declared uncompressed size before it decompresses, and a reservation that fails aborts the
+/// process: no `catch_unwind` can answer it (found by the `recording` fuzz target, a chunk
+/// claiming 5.8e17 bytes). Our writer's chunks hold a frame or a few, far below this.
+pub const MAX_CHUNK_BYTES: u64 = 1 << 30;
+
+/// Walks the file's top-level records (opcode, u64 length, body) and refuses a chunk that
+/// declares more than [`MAX_CHUNK_BYTES`] uncompressed; everything else is mcap's to judge.
+fn check_chunk_sizes(bytes: &[u8]) -> Result<(), Error> {
+    const CHUNK: u8 = 0x06;
+    const FOOTER: u8 = 0x02;
+    const MAGIC: usize = 8;
+    let u64_at = |at: usize| {
+        let b = bytes.get(at..at.checked_add(8)?)?;
+        Some(u64::from_le_bytes(b.try_into().ok()?))
+    };
+    let mut at = MAGIC;
+    while let (Some(&opcode), Some(length)) = (bytes.get(at), u64_at(at + 1)) {
+        let body = at + 9;
+        // A chunk's body starts with its message start and end times, then its uncompressed size.
+        if opcode == CHUNK
+            && let Some(size) = u64_at(body + 16)
+            && size > MAX_CHUNK_BYTES
+        {
+            return Err(Error::Mcap(format!(
+                "malformed file: the chunk at byte {at} declares {size} bytes uncompressed, \
+                 more than the {MAX_CHUNK_BYTES} a recording may hold in one chunk"
+            )));
+        }
+        match usize::try_from(length)
+            .ok()
+            .and_then(|l| body.checked_add(l))
+        {
+            Some(next) if opcode != FOOTER => at = next,
+            _ => break,
+        }
+    }
+    Ok(())
 }
 
 fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {

@@ -153,6 +153,15 @@ fn a_record_length_near_the_integer_limit_is_an_error_not_a_panic() {
     assert!(err.to_string().contains("MCAP"), "{err}");
 }
 
+/// Found by the `recording` fuzz target: a zstd chunk declaring 5.8e17 bytes uncompressed, which
+/// mcap 0.26 tried to reserve (an allocation failure aborts the process). It is refused first.
+#[test]
+fn a_chunk_declaring_an_impossible_size_is_an_error_not_an_abort() {
+    let bytes = include_bytes!("data/fuzz-mcap-huge-chunk.mcap");
+    let err = landing_recording::read_bytes(bytes).unwrap_err();
+    assert!(err.to_string().contains("declares"), "{err}");
+}
+
 /// Found by the `ply` fuzz target: a binary file whose header claims up to 2^31 rows of an
 /// element with no properties, which the reader counted through one by one (minutes). Rows of
 /// no bytes are now skipped, so the file is answered at once.

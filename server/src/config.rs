@@ -158,6 +158,10 @@ pub struct SegmentationConfig {
     /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
     /// sees rooftop-entrance tops best (EVALUATION.md).
     pub input_sizes: String,
+    /// A pixel the model calls landable stays landable only when the model's confidence in it
+    /// (its `confidence` output: the top class's probability) is at least this; 0 = off. Needs
+    /// a model with the output (the shipped one has it; `models/MODEL_CARD.md`, "Safety").
+    pub min_confidence: f64,
     /// The least severe of ONNX Runtime's own log messages that is logged: "verbose", "info",
     /// "warning", "error" or "fatal". ONNX Runtime writes about 200 INFO lines while it loads
     /// the model; `log.filter` still applies to what passes (its target is `ort`).
@@ -223,6 +227,7 @@ impl Default for SegmentationConfig {
             sessions: 1,
             ort_library: PathBuf::new(),
             input_sizes: "320x240,256x192".into(),
+            min_confidence: 0.0,
             ort_log_level: landing_perception::OrtLogLevel::default().to_string(),
         }
     }
@@ -369,6 +374,12 @@ impl Config {
         }
         g.parsed_input_sizes()?;
         g.parsed_ort_log_level()?;
+        if !(0.0..=1.0).contains(&g.min_confidence) {
+            return Err(Error::config(
+                "segmentation.min_confidence",
+                format!("{} is outside 0..=1", g.min_confidence),
+            ));
+        }
         if g.enabled {
             require_file("segmentation.model_path", &g.model_path)?;
             if !g.ort_library.as_os_str().is_empty() {
@@ -723,6 +734,10 @@ mod tests {
             (
                 "[segmentation]\ninput_sizes = \"320x8\"\n",
                 "segmentation.input_sizes",
+            ),
+            (
+                "[segmentation]\nmin_confidence = 1.5\n",
+                "segmentation.min_confidence",
             ),
             (
                 "[segmentation]\ninput_sizes = \"320\"\n",

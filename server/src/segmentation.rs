@@ -33,6 +33,9 @@ pub struct Segmenter {
     next: AtomicUsize,
     /// The input sizes of every frame, finest first (the masks are fused).
     sizes: Vec<(u32, u32)>,
+    /// `segmentation.min_confidence` as the model's confidence byte (255 × probability); `None`
+    /// when off.
+    min_confidence: Option<u8>,
 }
 
 impl Segmenter {
@@ -68,6 +71,18 @@ impl Segmenter {
                 "segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU"
             );
         }
+        let min_confidence =
+            (config.min_confidence > 0.0).then(|| (config.min_confidence * 255.0).round() as u8);
+        if min_confidence.is_some() && !sessions[0].info().confidence {
+            return Err(Error::config(
+                "segmentation.min_confidence",
+                format!(
+                    "{} has no `{}` output (models/training/add_confidence.py adds it)",
+                    config.model_path.display(),
+                    landing_perception::CONFIDENCE_OUTPUT
+                ),
+            ));
+        }
         // No sizes: the model's own.
         let sizes = if sizes.is_empty() {
             let i = sessions[0].info();
@@ -79,6 +94,7 @@ impl Segmenter {
             sessions,
             next: AtomicUsize::new(0),
             sizes,
+            min_confidence,
         })
     }
 
@@ -90,8 +106,11 @@ impl Segmenter {
     pub fn describe(&self) -> String {
         let i = self.info();
         let sizes: Vec<String> = self.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
+        let confidence = self
+            .min_confidence
+            .map_or(String::new(), |c| format!(", confidence ≥ {c}/255"));
         format!(
-            "{} (at {}, {}, {} session(s), sha256 {})",
+            "{} (at {}{confidence}, {}, {} session(s), sha256 {})",
             i.name,
             sizes.join(" + "),
             i.execution_provider,
@@ -113,8 +132,10 @@ impl Segmenter {
         }
     }
 
-    /// Segments the decoded `image` at every input size and fuses the masks (a pixel is landable
-    /// only where every size says so), then classifies as [`classify_with_mask`] does.
+    /// Segments the decoded `image` at every input size, makes unknown the landable pixels the
+    /// model is not confident enough in (`segmentation.min_confidence`), and fuses the masks (a
+    /// pixel is landable only where every size says so), then classifies as
+    /// [`classify_with_mask`] does.
     pub fn classify(
         &self,
         camera: &CameraImage,
@@ -126,11 +147,23 @@ impl Segmenter {
         let t0 = Instant::now();
         let session =
             &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
+        let landable_class = |c: u8| landable.contains(&c);
         let masks = self
             .sizes
             .iter()
-            .map(|&(w, h)| session.segment_at(image, w, h))
-            .collect::<Result<Vec<_>, _>>()
+            .map(|&(w, h)| {
+                let Some(min) = self.min_confidence else {
+                    return session.segment_at(image, w, h);
+                };
+                let s = session.segment_with_confidence_at(image, w, h)?;
+                let mut mask = s.mask;
+                // `load` checked that the model has the output.
+                if let Some(confidence) = s.confidence {
+                    mask.demote_unconfident(&confidence, min, landable_class)?;
+                }
+                Ok(mask)
+            })
+            .collect::<Result<Vec<_>, PerceptionError>>()
             .map_err(|e| model_error(&e))?;
         let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;

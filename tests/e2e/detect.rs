@@ -251,3 +251,48 @@ async fn a_class_image_classifies_the_points_and_keeps_safe_circles_off_its_obst
     assert!(ground.sites.is_empty(), "{:?}", ground.sites);
     server.stop().await;
 }
+
+/// `segmentation.min_confidence` needs a model with the `confidence` output; with one, model mode
+/// answers as the in-process pipeline does, and a strict threshold makes less of the roof
+/// landable.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn min_confidence_keeps_unsure_roof_pixels_out_of_the_landing_sites() {
+    let mut config = crate::support::server_config();
+    assert!(
+        config.segmentation.enabled,
+        "the shipped model and ONNX Runtime are needed (bash scripts/setup.sh)"
+    );
+    config.segmentation.min_confidence = 0.99;
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let refused = landing_server::start(config.clone(), listener).await.err();
+    let refused = format!(
+        "{:#}",
+        refused.expect("the shipped model has no confidence output")
+    );
+    assert!(refused.contains("segmentation.min_confidence"), "{refused}");
+
+    config.segmentation.model_path =
+        crate::support::workspace_root().join("models/rooftop-segmentation-confidence.onnx");
+    config.segmentation.input_sizes = "320x240".into();
+    let strict = TestServer::with_config(config.clone()).await;
+    let items = crate::support::check(&strict, 11, mode(SegmentationMode::Model)).await;
+    config.segmentation.min_confidence = 0.0;
+    let plain = TestServer::with_config(config).await;
+    let plain_items = crate::support::check(&plain, 11, mode(SegmentationMode::Model)).await;
+    let area = |items: &[landing_client::StreamItem]| -> f64 {
+        items
+            .iter()
+            .filter_map(|i| i.outcome.result())
+            .flat_map(|r| &r.sites)
+            .map(|s| s.safe_radius_m * s.safe_radius_m)
+            .sum()
+    };
+    assert!(
+        area(&items) < area(&plain_items),
+        "strict {} vs plain {}",
+        area(&items),
+        area(&plain_items)
+    );
+    strict.stop().await;
+    plain.stop().await;
+}
