@@ -61,7 +61,10 @@ fn check_chunk_sizes(bytes: &[u8]) -> Result<(), Error> {
         Some(u64::from_le_bytes(b.try_into().ok()?))
     };
     let mut at = MAGIC;
-    while let (Some(&opcode), Some(length)) = (bytes.get(at), u64_at(at + 1)) {
+    // `at` is within the file whenever it is added to (`get` checks it first), so no sum here
+    // can overflow; the next record's offset is a checked sum.
+    while let Some(&opcode) = bytes.get(at) {
+        let Some(length) = u64_at(at + 1) else { break };
         let body = at + 9;
         // A chunk's body starts with its message start and end times, then its uncompressed size.
         if opcode == CHUNK

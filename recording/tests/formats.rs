@@ -172,3 +172,13 @@ fn rows_of_no_properties_are_not_counted_one_by_one() {
     let points = answer.map(|c| c.points.len()).map_err(|e| e.to_string());
     assert_eq!(points, Ok(0), "{points:?}");
 }
+
+/// Found by the `recording` fuzz target right after the chunk check above went in: a record
+/// length that sends the check's next offset near the integer limit, where its first version
+/// added to it unchecked (a panic before `catch_unwind`). It is an error.
+#[test]
+fn a_record_length_near_the_integer_limit_is_an_error_in_the_chunk_check_too() {
+    let bytes = include_bytes!("data/fuzz-mcap-nounwind.mcap");
+    let err = landing_recording::read_bytes(bytes).unwrap_err();
+    assert!(err.to_string().contains("MCAP"), "{err}");
+}
