@@ -31,11 +31,14 @@ pub fn read(path: &Path) -> Result<Vec<RecordedFrame>, Error> {
 
 /// Like [`read`], from the bytes of a whole file.
 ///
-/// A malformed file is an error, never a panic: mcap 0.26 panics on some (an unchecked length
-/// addition in its record reader, found by the `recording` fuzz target; see RELIABILITY.md), so
-/// its parsing runs under `catch_unwind` and a panic becomes [`Error::Mcap`].
+/// A malformed file is an error, never a panic or an abort. mcap 0.26 panics on some files (an
+/// unchecked length addition in its record reader), so its parsing runs under `catch_unwind` and
+/// a panic becomes [`Error::Mcap`]; and it reserves memory for each record a chunk declares, so a
+/// declared length near 2^64 failed to allocate and aborted the process, which no
+/// `catch_unwind` can answer. Records are therefore read with mcap's own
+/// `record_length_limit`, [`MAX_RECORD_BYTES`]. Both were found by the `recording` fuzz target
+/// (RELIABILITY.md).
 pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
-    check_chunk_sizes(bytes)?;
     // Nothing outside the closure is touched: a panic leaves no half-updated state behind.
     std::panic::catch_unwind(|| read_messages(bytes)).unwrap_or_else(|_| {
         Err(Error::Mcap(
@@ -44,54 +47,40 @@ pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     })
 }
 
-/// The largest uncompressed chunk a recording may declare. mcap 0.26 reserves a chunk's
-/// declared uncompressed size before it decompresses, and a reservation that fails aborts the
-/// process: no `catch_unwind` can answer it (found by the `recording` fuzz target, a chunk
-/// claiming 5.8e17 bytes). Our writer's chunks hold a frame or a few, far below this.
-pub const MAX_CHUNK_BYTES: u64 = 1 << 30;
+/// The largest record (and chunk) a recording may hold: a frame is at most the server's 64 MiB
+/// request limit, and our writer's chunks hold a frame or a few.
+pub const MAX_RECORD_BYTES: usize = 512 << 20;
 
-/// Walks the file's top-level records (opcode, u64 length, body) and refuses a chunk that
-/// declares more than [`MAX_CHUNK_BYTES`] uncompressed; everything else is mcap's to judge.
-fn check_chunk_sizes(bytes: &[u8]) -> Result<(), Error> {
-    const CHUNK: u8 = 0x06;
-    const FOOTER: u8 = 0x02;
-    const MAGIC: usize = 8;
-    let u64_at = |at: usize| {
-        let b = bytes.get(at..at.checked_add(8)?)?;
-        Some(u64::from_le_bytes(b.try_into().ok()?))
-    };
-    let mut at = MAGIC;
-    // `at` is within the file whenever it is added to (`get` checks it first), so no sum here
-    // can overflow; the next record's offset is a checked sum.
-    while let Some(&opcode) = bytes.get(at) {
-        let Some(length) = u64_at(at + 1) else { break };
-        let body = at + 9;
-        // A chunk's body starts with its message start and end times, then its uncompressed size.
-        if opcode == CHUNK
-            && let Some(size) = u64_at(body + 16)
-            && size > MAX_CHUNK_BYTES
-        {
-            return Err(Error::Mcap(format!(
-                "malformed file: the chunk at byte {at} declares {size} bytes uncompressed, \
-                 more than the {MAX_CHUNK_BYTES} a recording may hold in one chunk"
-            )));
+/// The messages of a whole MCAP file, read with the record length limit.
+fn messages(bytes: &[u8]) -> impl Iterator<Item = Result<mcap::Message<'static>, Error>> + '_ {
+    use mcap::sans_io::{LinearReaderOptions, MessageReadEvent, MessageReader};
+    let mut reader = MessageReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(MAX_RECORD_BYTES),
+    );
+    let mut rest = bytes;
+    std::iter::from_fn(move || {
+        loop {
+            match reader.next_event()? {
+                Ok(MessageReadEvent::ReadRequest(want)) => {
+                    // At the end of the file this inserts nothing, and the reader says what is
+                    // missing.
+                    let n = want.min(rest.len());
+                    reader.insert(n).copy_from_slice(&rest[..n]);
+                    reader.notify_read(n);
+                    rest = &rest[n..];
+                }
+                Ok(MessageReadEvent::Message(m)) => return Some(Ok(m)),
+                Err(e) => return Some(Err(e.into())),
+            }
         }
-        match usize::try_from(length)
-            .ok()
-            .and_then(|l| body.checked_add(l))
-        {
-            Some(next) if opcode != FOOTER => at = next,
-            _ => break,
-        }
-    }
-    Ok(())
+    })
 }
 
 fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     let mut frames = Vec::new();
     let mut truths = BTreeMap::new();
     let mut labels = BTreeMap::new();
-    for message in mcap::MessageStream::new(bytes)? {
+    for message in messages(bytes) {
         let message = message?;
         let schema = message
             .channel

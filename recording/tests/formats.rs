@@ -153,13 +153,18 @@ fn a_record_length_near_the_integer_limit_is_an_error_not_a_panic() {
     assert!(err.to_string().contains("MCAP"), "{err}");
 }
 
-/// Found by the `recording` fuzz target: a zstd chunk declaring 5.8e17 bytes uncompressed, which
-/// mcap 0.26 tried to reserve (an allocation failure aborts the process). It is refused first.
+/// Found by the `recording` fuzz target: zstd chunks whose records declare lengths near 2^64,
+/// which mcap 0.26 tried to reserve (an allocation failure aborts the process; a test that
+/// reached it would abort the test binary). They are errors.
 #[test]
-fn a_chunk_declaring_an_impossible_size_is_an_error_not_an_abort() {
-    let bytes = include_bytes!("data/fuzz-mcap-huge-chunk.mcap");
-    let err = landing_recording::read_bytes(bytes).unwrap_err();
-    assert!(err.to_string().contains("declares"), "{err}");
+fn records_declaring_impossible_lengths_are_errors_not_aborts() {
+    for bytes in [
+        &include_bytes!("data/fuzz-mcap-huge-chunk.mcap")[..],
+        &include_bytes!("data/fuzz-mcap-huge-chunk-record.mcap")[..],
+    ] {
+        let err = landing_recording::read_bytes(bytes).unwrap_err();
+        assert!(err.to_string().contains("MCAP"), "{err}");
+    }
 }
 
 /// Found by the `ply` fuzz target: a binary file whose header claims up to 2^31 rows of an
@@ -171,14 +176,4 @@ fn rows_of_no_properties_are_not_counted_one_by_one() {
     let answer = landing_recording::ply::parse(bytes);
     let points = answer.map(|c| c.points.len()).map_err(|e| e.to_string());
     assert_eq!(points, Ok(0), "{points:?}");
-}
-
-/// Found by the `recording` fuzz target right after the chunk check above went in: a record
-/// length that sends the check's next offset near the integer limit, where its first version
-/// added to it unchecked (a panic before `catch_unwind`). It is an error.
-#[test]
-fn a_record_length_near_the_integer_limit_is_an_error_in_the_chunk_check_too() {
-    let bytes = include_bytes!("data/fuzz-mcap-nounwind.mcap");
-    let err = landing_recording::read_bytes(bytes).unwrap_err();
-    assert!(err.to_string().contains("MCAP"), "{err}");
 }
