@@ -47,9 +47,11 @@ pub fn read_bytes(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     })
 }
 
-/// The largest record (and chunk) a recording may hold: a frame is at most the server's 64 MiB
-/// request limit, and our writer's chunks hold a frame or a few.
-pub const MAX_RECORD_BYTES: usize = 512 << 20;
+/// The largest record a recording may hold: twice the server's 64 MiB request limit, a frame's
+/// most. mcap zero-fills a record's buffer before decompressing into it, so this is also the
+/// most memory a small malformed file can make the reader take (the fuzzer's peak RSS follows
+/// it).
+pub const MAX_RECORD_BYTES: usize = 128 << 20;
 
 /// The messages of a whole MCAP file, read with the record length limit.
 fn messages(bytes: &[u8]) -> impl Iterator<Item = Result<mcap::Message<'static>, Error>> + '_ {
