@@ -415,3 +415,45 @@ mod tests {
         }
     }
 }
+
+/// What the `detect` fuzz target (`fuzz/fuzz_targets/detect.rs`) makes of its bytes, so that its
+/// finds replay in this crate's tests: 8 bytes pick parameters within the ranges the API
+/// accepts, then 13 bytes a point (f32 x, y, z; a class), at most `max_points` points; points
+/// with a non-finite coordinate or one beyond 1e7 m are skipped, as the service refuses them.
+/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd.
+pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
+    let (head, body) = data.split_first_chunk::<8>()?;
+    let unit = |b: u8| f64::from(b) / 255.0;
+    let params = crate::Params {
+        l_max_m: 0.05 + unit(head[0]) * 20.0,
+        dot_min: unit(head[1]) * 0.999,
+        z_min_m: unit(head[2]) * 2.0,
+        polylabel_precision_m: 0.01 + unit(head[3]) * 2.0,
+        min_region_triangles: usize::from(head[4] % 16),
+        max_sites: usize::from(head[5] % 8) + 1,
+        ..crate::Params::default()
+    };
+    let mut points = Vec::new();
+    let mut classes = Vec::new();
+    for chunk in body.chunks_exact(13).take(max_points) {
+        let v = |i: usize| f32::from_le_bytes([chunk[i], chunk[i + 1], chunk[i + 2], chunk[i + 3]]);
+        let p = [v(0), v(4), v(8)];
+        if p.iter().all(|c| c.is_finite() && c.abs() <= 1.0e7) {
+            points.push(p);
+            classes.push(chunk[12] % 15);
+        }
+    }
+    Some(DetectInput {
+        points,
+        classes: (head[6] & 1 == 1).then_some(classes),
+        params,
+    })
+}
+
+/// The arguments of one [`crate::detect`] call.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DetectInput {
+    pub points: Vec<[f32; 3]>,
+    pub classes: Option<Vec<u8>>,
+    pub params: crate::Params,
+}

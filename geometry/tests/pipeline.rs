@@ -1,7 +1,7 @@
 //! End-to-end `detect`: named regression scenes, degenerate input, and seeded property tests on
 //! random roofs with obstacles, ground and walls.
 
-use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof};
+use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof, fuzz_detect_input};
 use landing_geometry::validation::{Location, check_detection, locate_in_ring};
 use landing_geometry::{
     Detection, Disk, GeometryError, Params, Polygon, SemanticClass, TriangulationConfig,
@@ -529,41 +529,14 @@ fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
     );
 }
 
-/// Decodes a `detect` fuzz input as `fuzz/fuzz_targets/detect.rs` does: 8 parameter bytes, then
-/// 13 bytes a point (f32 x, y, z; class), points out of the accepted range skipped.
-fn fuzz_input(data: &[u8]) -> (Vec<[f32; 3]>, Option<Vec<u8>>, Params) {
-    let (head, body) = data.split_first_chunk::<8>().expect("8 parameter bytes");
-    let unit = |b: u8| f64::from(b) / 255.0;
-    let params = Params {
-        l_max_m: 0.05 + unit(head[0]) * 20.0,
-        dot_min: unit(head[1]) * 0.999,
-        z_min_m: unit(head[2]) * 2.0,
-        polylabel_precision_m: 0.01 + unit(head[3]) * 2.0,
-        min_region_triangles: usize::from(head[4] % 16),
-        max_sites: usize::from(head[5] % 8) + 1,
-        ..Params::default()
-    };
-    let mut points = Vec::new();
-    let mut classes = Vec::new();
-    for chunk in body.chunks_exact(13).take(512) {
-        let v = |i: usize| f32::from_le_bytes(chunk[i * 4..i * 4 + 4].try_into().expect("4 bytes"));
-        let p = [v(0), v(1), v(2)];
-        if p.iter().all(|c| c.is_finite() && c.abs() <= 1.0e7) {
-            points.push(p);
-            classes.push(chunk[12] % 15);
-        }
-    }
-    (points, (head[6] & 1 == 1).then_some(classes), params)
-}
-
 /// Found by the `detect` fuzz target (RELIABILITY.md): a real hole of about 1e-31 m² whose
 /// vertices mix x of 1e-41 and 1e-23 m. Its shoelace area rounds to 0, and the validity check
 /// used to call it a zero-area ring; the check is exact now.
 #[test]
 fn fuzz_regression_tiny_hole_is_valid() {
-    let (points, classes, params) =
-        fuzz_input(include_bytes!("data/fuzz-detect-zero-area-hole.bin"));
-    let d = run(&points, classes.as_deref(), &params);
+    let input = fuzz_detect_input(include_bytes!("data/fuzz-detect-zero-area-hole.bin"), 512)
+        .expect("parameter bytes");
+    let d = run(&input.points, input.classes.as_deref(), &input.params);
     assert_eq!(d.sites.len(), 1);
     assert_eq!(d.sites[0].polygon.holes.len(), 2, "both holes kept");
 }
