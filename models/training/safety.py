@@ -2,9 +2,10 @@
 """The model card's safety table: per true class, the share of its pixels the shipped model calls
 landable (building rooftop), at each input size the service runs and under the service's
 two-size guard (a pixel is landable only where every size says so); with --confidence, also at
-the first size alone with a pixel landable only where the model's rooftop probability is at
-least each threshold (the probabilities are the softmax of the logits the graph's ArgMax takes,
-added as an output in memory: the shipped graph outputs class ids only).
+the first size alone with a rooftop pixel landable only where the model's confidence is at least
+each threshold, as `segmentation.min_confidence` decides it (the `confidence` output of
+add_confidence.py, added in memory when the model lacks it; for thresholds of 0.5 and above it
+is the rooftop probability).
 
 A non-rooftop pixel called landable is what can become an unsafe landing site: an obstacle on
 the roof (classes 5-14), or the ground or a wall beside it (2, 3). Pixels labelled 0 (unknown)
@@ -31,10 +32,10 @@ from pathlib import Path
 import numpy as np
 import onnx
 import onnxruntime as ort
-from onnx import TensorProto, helper
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from add_confidence import add_confidence  # noqa: E402
 from seg.data import load_split, to_input  # noqa: E402
 from seg.models import CLASS_NAMES, NUM_CLASSES  # noqa: E402
 
@@ -43,40 +44,28 @@ ROOFTOP = 4
 ROOF_OBSTACLES = range(5, NUM_CLASSES)
 
 
-def session_with_probabilities(path: str) -> ort.InferenceSession:
-    """The model with a second output, `rooftop_probability` [1, H, W] (float32)."""
+def session_with_confidence(path: str) -> ort.InferenceSession:
+    """The model with its `confidence` output (added in memory when it lacks one)."""
     model = onnx.load(path)
-    graph = model.graph
-    logits = next(n for n in graph.node if n.op_type == "ArgMax").input[0]
-    graph.node.extend([
-        helper.make_node("Softmax", [logits], ["probabilities"], axis=1),
-        helper.make_node("Constant", [], ["rooftop_channel"],
-                         value=helper.make_tensor("c", TensorProto.INT64, [1], [ROOFTOP - 1])),
-        helper.make_node("Gather", ["probabilities", "rooftop_channel"], ["rooftop_nchw"], axis=1),
-        helper.make_node("Constant", [], ["rooftop_channel_axis"],
-                         value=helper.make_tensor("a", TensorProto.INT64, [1], [1])),
-        helper.make_node("Squeeze", ["rooftop_nchw", "rooftop_channel_axis"], ["rooftop_probability"]),
-    ])
-    graph.output.append(helper.make_tensor_value_info("rooftop_probability", TensorProto.FLOAT,
-                                                      ["N", "H", "W"]))
-    onnx.checker.check_model(model)
+    if not any(o.name == "confidence" for o in model.graph.output):
+        model = add_confidence(model)
     so = ort.SessionOptions()
     so.intra_op_num_threads = 1
     return ort.InferenceSession(model.SerializeToString(), so, providers=["CPUExecutionProvider"])
 
 
 def predict(sess, image: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
-    """The model's classes and rooftop probability at input size (w, h), resized back to the
-    image's size (nearest)."""
+    """The model's classes and confidence (uint8, 255 x probability) at input size (w, h),
+    resized back to the image's size (nearest)."""
     height, width = image.shape[:2]
     resized = np.asarray(Image.fromarray(image).resize((w, h), Image.BILINEAR))
-    classes, prob = sess.run(["classes", "rooftop_probability"],
-                             {"image": to_input(resized[None].copy()).numpy()})
-    classes, prob = classes[0], prob[0]
+    classes, confidence = sess.run(["classes", "confidence"],
+                                   {"image": to_input(resized[None].copy()).numpy()})
+    classes, confidence = classes[0], confidence[0]
     if (w, h) != (width, height):
         classes = np.asarray(Image.fromarray(classes).resize((width, height), Image.NEAREST))
-        prob = np.asarray(Image.fromarray(prob).resize((width, height), Image.NEAREST))
-    return classes, prob
+        confidence = np.asarray(Image.fromarray(confidence).resize((width, height), Image.NEAREST))
+    return classes, confidence
 
 
 def main() -> int:
@@ -84,13 +73,13 @@ def main() -> int:
     ap.add_argument("--test", required=True, help="dataset directory (landing-sim dataset)")
     ap.add_argument("--model", required=True)
     ap.add_argument("--sizes", default="320x240,256x192", help="input sizes, as the service's input_sizes")
-    ap.add_argument("--confidence", default="", help="rooftop probability thresholds at the first size")
+    ap.add_argument("--confidence", default="", help="confidence thresholds at the first size")
     ap.add_argument("--limit", type=int)
     ap.add_argument("--json")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
     thresholds = [float(t) for t in args.confidence.split(",") if t]
-    sess = session_with_probabilities(args.model)
+    sess = session_with_confidence(args.model)
     images, labels = load_split(args.test, limit=args.limit)
     first = f"{sizes[0][0]}x{sizes[0][1]}"
     columns = ([f"{w}x{h}" for w, h in sizes] + (["guard"] if len(sizes) > 1 else [])
@@ -101,18 +90,19 @@ def main() -> int:
         keep = label != 0
         truth += np.bincount(label[keep], minlength=NUM_CLASSES)
         masks = []
-        probability = None
         for (w, h), column in zip(sizes, columns):
-            classes, prob = predict(sess, image, w, h)
-            probability = prob if probability is None else probability
+            classes, confidence = predict(sess, image, w, h)
             roof = classes == ROOFTOP
+            if not masks:
+                first_roof, first_confidence = roof, confidence
             masks.append(roof)
             landable[column] += np.bincount(label[keep & roof], minlength=NUM_CLASSES)
         if len(sizes) > 1:
             guard = np.logical_and.reduce(masks)
             landable["guard"] += np.bincount(label[keep & guard], minlength=NUM_CLASSES)
         for t in thresholds:
-            sure = probability >= t
+            # As the service: min = round(255 t), a pixel below it is not landable.
+            sure = first_roof & (first_confidence >= round(255 * t))
             landable[f"{first} p≥{t:g}"] += np.bincount(label[keep & sure], minlength=NUM_CLASSES)
 
     def share(column: str, classes) -> float | None:

@@ -376,7 +376,7 @@ impl Segmenter {
         height: u32,
     ) -> Result<Segmentation, PerceptionError> {
         check_not_empty(image)?;
-        self.run_with_confidence(&preprocess(image, width, height), width, height)
+        self.infer(&preprocess(image, width, height), width, height, true)
     }
 
     /// Runs the model on an already preprocessed NCHW float32 tensor of `3 * height * width`
@@ -390,16 +390,7 @@ impl Segmenter {
         Ok(self.infer(input, width, height, false)?.mask)
     }
 
-    /// [`Segmenter::run`] with the confidence output, when the graph has one.
-    pub fn run_with_confidence(
-        &self,
-        input: &[f32],
-        width: u32,
-        height: u32,
-    ) -> Result<Segmentation, PerceptionError> {
-        self.infer(input, width, height, true)
-    }
-
+    /// Runs the graph for the class ids alone, or for every output (`with_confidence`).
     fn infer(
         &self,
         input: &[f32],

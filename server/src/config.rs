@@ -160,7 +160,9 @@ pub struct SegmentationConfig {
     pub input_sizes: String,
     /// A pixel the model calls landable stays landable only when the model's confidence in it
     /// (its `confidence` output: the top class's probability) is at least this; 0 = off. Needs
-    /// a model with the output (the shipped one has it; `models/MODEL_CARD.md`, "Safety").
+    /// a model with the output: `models/rooftop-segmentation-confidence.onnx`, not the default
+    /// model (`models/MODEL_CARD.md`, "Safety"). Off by default: one size with a threshold was
+    /// not as safe as the two-size guard (EVALUATION.md).
     pub min_confidence: f64,
     /// The least severe of ONNX Runtime's own log messages that is logged: "verbose", "info",
     /// "warning", "error" or "fatal". ONNX Runtime writes about 200 INFO lines while it loads

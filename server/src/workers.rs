@@ -12,6 +12,7 @@ use tracing::Instrument as _;
 
 use crate::Error;
 use crate::error::Capacity;
+use crate::frame::{CameraImage, ImagePixels};
 use crate::pipeline::{
     Frame, FrameOptions, FrameOutput, Pipeline, StreamMap, run_fused, run_pipeline,
 };
@@ -335,11 +336,11 @@ pub(crate) struct Admitted {
 /// as received and its strings. Decoded pixels exist only while a worker computes it.
 fn held_bytes(frame: &Frame) -> usize {
     let cloud = &frame.cloud;
-    let image = |i: &Option<crate::frame::CameraImage>| {
+    let image = |i: &Option<CameraImage>| {
         i.as_ref().map_or(0, |i| match &i.pixels {
-            crate::frame::ImagePixels::Encoded { data, .. }
-            | crate::frame::ImagePixels::Rgb8 { data, .. }
-            | crate::frame::ImagePixels::Mono8 { data, .. } => data.len(),
+            ImagePixels::Encoded { data, .. }
+            | ImagePixels::Rgb8 { data, .. }
+            | ImagePixels::Mono8 { data, .. } => data.len(),
         })
     };
     std::mem::size_of::<Frame>()
