@@ -69,6 +69,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
     "server": {
         "listen": str,
         "metrics_listen": str,
+        "foxglove_listen": str,
         "max_request_bytes": int,
         "shutdown_grace_s": (int, float),
     },

@@ -422,8 +422,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
             writeln!(w, "{}", item_json(item))?;
         }
         if let Some(w) = mcap.as_mut() {
-            w.write_result(rec.log_time_ns, &response_of(item))
-                .map_err(std::io::Error::other)?;
+            write_replayed(w, rec, &response_of(item)).map_err(std::io::Error::other)?;
         }
         Ok(())
     })
@@ -448,6 +447,24 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
     } else {
         exit::OK
     })
+}
+
+/// A replayed frame in the output recording: its inputs as recorded (so that the output replays
+/// and opens in Foxglove on its own) and the answer with its drawings, at the frame's log time.
+fn write_replayed<W: std::io::Write + std::io::Seek>(
+    w: &mut landing_recording::Writer<W>,
+    rec: &RecordedFrame,
+    response: &StreamLandingSitesResponse,
+) -> Result<(), landing_recording::Error> {
+    let t = rec.log_time_ns;
+    w.write_frame(t, &rec.frame)?;
+    if let Some(truth) = &rec.truth {
+        w.write_truth(t, truth)?;
+    }
+    if let Some(labels) = &rec.labels {
+        w.write_labels(t, rec.frame.sequence, labels)?;
+    }
+    w.write_result(t, response, rec.frame.image.as_ref())
 }
 
 /// Counts of a replay.

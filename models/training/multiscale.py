@@ -49,13 +49,14 @@ def frames(path: Path):
     images, labels = [], []
     with path.open("rb") as f:
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        # Both are foxglove.CompressedImage (PNG), one per frame, in frame order.
         for _, channel, _, message in reader.iter_decoded_messages(
-            topics=["/frame", "/camera/labels"]
+            topics=["/camera/image", "/camera/labels"]
         ):
-            if channel.topic == "/frame":
-                images.append(Image.open(io.BytesIO(message.image.compressed.data)).convert("RGB"))
+            if channel.topic == "/camera/image":
+                images.append(Image.open(io.BytesIO(message.data)).convert("RGB"))
             else:
-                labels.append(np.array(Image.open(io.BytesIO(message.compressed.data))))
+                labels.append(np.array(Image.open(io.BytesIO(message.data))))
     return zip(images, labels)
 
 

@@ -6,19 +6,29 @@
 //! through [`ply`]. It knows the wire types (`landing_proto`) and nothing of the simulator, the
 //! pipeline or gRPC.
 //!
-//! A recording has these protobuf channels (schemas embedded from
-//! `landing_proto::FILE_DESCRIPTOR_SET`, named by the fully-qualified message name):
+//! A recording speaks Foxglove's own schemas wherever one exists, so that it opens in Foxglove
+//! (and any MCAP tool) with a 3-D scene and camera view, and keeps each value in one place. Per
+//! frame, all at the frame's log time:
 //!
 //! | topic | schema | content |
 //! |---|---|---|
-//! | [`FRAME_TOPIC`] `/frame` | `landing.v1.Frame` | the LiDAR scan and camera image of one frame |
+//! | [`FRAME_TOPIC`] `/frame` | `landing.v1.FrameHeader` | drone id, sequence, time, geodetic origin |
+//! | [`LIDAR_TOPIC`] `/lidar/points` | `foxglove.PointCloud` | the scan in its sensor frame: x, y, z, intensity, class |
+//! | [`CAMERA_TOPIC`] `/camera/image` | `foxglove.CompressedImage` | the camera image (raw pixels: [`CAMERA_RAW_TOPIC`], `foxglove.RawImage`) |
+//! | [`CALIBRATION_TOPIC`] `/camera/calibration` | `foxglove.CameraCalibration` | pinhole intrinsics |
+//! | [`TF_TOPIC`] `/tf` | `foxglove.FrameTransforms` | `world → lidar`, `world → camera` (the poses the frame carries) |
+//! | [`LABELS_TOPIC`] `/camera/labels` | `foxglove.CompressedImage` | true classes: 8-bit grayscale PNG, pixel value = class id |
 //! | [`TRUTH_TOPIC`] `/ground_truth` | `landing.v1.GroundTruth` | roofs in view, obstacles, true best landing point per roof |
-//! | [`LABELS_TOPIC`] `/camera/labels` | `landing.v1.CameraImage` | 8-bit grayscale PNG, pixel value = class id |
+//! | [`TRUTH_SCENE_TOPIC`] `/ground_truth/scene` | `foxglove.SceneUpdate` | the truth drawn: roof outlines, obstacle boxes by class, best circle |
 //! | [`RESULT_TOPIC`] `/landing/results` | `landing.v1.StreamLandingSitesResponse` | the service's answer to a frame |
+//! | [`SITES_TOPIC`] `/landing/sites` | `foxglove.SceneUpdate` | the answer drawn: polygons with holes, safe circles, centres, labels |
+//! | [`ANNOTATIONS_TOPIC`] `/camera/annotations` | `foxglove.ImageAnnotations` | the answer over the camera image (as `landing render`) |
 //!
-//! The messages of one frame share its log time, which is how the reader pairs them; frames are
-//! read from any channel whose schema is `landing.v1.Frame`, so recordings made by other tools
-//! with other topic names replay too.
+//! The `landing.v1` messages are the source of truth for what Foxglove has no schema for; the two
+//! scenes and the annotations are drawings of them ([`scene`]), written by the same call and
+//! never read back. The reader puts each [`v1::Frame`] back together from the header, cloud,
+//! image, calibration and transforms of one log time ([`convert`]), exactly. Older recordings,
+//! and tools that write whole `landing.v1.Frame` messages on any topic, replay too.
 //!
 //! ```
 //! use landing_proto::v1;
@@ -32,7 +42,7 @@
 //!
 //! let frames = read_bytes(&bytes)?;
 //! assert_eq!(frames.len(), 1);
-//! assert_eq!(frames[0].frame.sequence, 3);
+//! assert_eq!(frames[0].frame, frame);
 //! assert_eq!(frames[0].truth.as_ref().map(|t| t.sequence), Some(3));
 //! assert!(frames[0].labels.is_none());
 //! # Ok::<(), landing_recording::Error>(())
@@ -40,27 +50,53 @@
 
 #![forbid(unsafe_code)]
 
+pub mod convert;
 pub mod ply;
 mod read;
+pub mod scene;
 mod write;
 
-pub use read::{RecordedFrame, read, read_bytes};
+pub use convert::{FoxgloveFrame, WORLD_FRAME, frame_from_foxglove, frame_to_foxglove};
+pub use foxglove::messages as foxglove_messages;
+pub use read::{MAX_RECORD_BYTES, RecordedFrame, read, read_bytes};
 pub use write::{Writer, log_time_ns};
 
-/// Topic of the frames (`landing.v1.Frame`).
+/// Topic of the frame headers (`landing.v1.FrameHeader`): a frame's values that no Foxglove
+/// schema holds. Older recordings hold whole `landing.v1.Frame` messages here.
 pub const FRAME_TOPIC: &str = "/frame";
+/// Topic of the scans (`foxglove.PointCloud`).
+pub const LIDAR_TOPIC: &str = "/lidar/points";
+/// Topic of encoded camera images (`foxglove.CompressedImage`).
+pub const CAMERA_TOPIC: &str = "/camera/image";
+/// Topic of raw camera images (`foxglove.RawImage`).
+pub const CAMERA_RAW_TOPIC: &str = "/camera/image_raw";
+/// Topic of the camera intrinsics (`foxglove.CameraCalibration`).
+pub const CALIBRATION_TOPIC: &str = "/camera/calibration";
+/// Topic of the sensor poses (`foxglove.FrameTransforms`, from [`WORLD_FRAME`]).
+pub const TF_TOPIC: &str = "/tf";
+/// Topic of the true label images (`foxglove.CompressedImage`, PNG; older recordings:
+/// `landing.v1.CameraImage`).
+pub const LABELS_TOPIC: &str = "/camera/labels";
+/// Topic of raw true label images (`foxglove.RawImage`, `mono8`).
+pub const LABELS_RAW_TOPIC: &str = "/camera/labels_raw";
 /// Topic of the ground truth (`landing.v1.GroundTruth`).
 pub const TRUTH_TOPIC: &str = "/ground_truth";
-/// Topic of the true label images (`landing.v1.CameraImage`).
-pub const LABELS_TOPIC: &str = "/camera/labels";
+/// Topic of the ground truth drawn (`foxglove.SceneUpdate`).
+pub const TRUTH_SCENE_TOPIC: &str = "/ground_truth/scene";
 /// Topic of the service's answers (`landing.v1.StreamLandingSitesResponse`).
 pub const RESULT_TOPIC: &str = "/landing/results";
+/// Topic of the answers drawn in 3-D (`foxglove.SceneUpdate`).
+pub const SITES_TOPIC: &str = "/landing/sites";
+/// Topic of the answers drawn over the camera image (`foxglove.ImageAnnotations`).
+pub const ANNOTATIONS_TOPIC: &str = "/camera/annotations";
 
 /// Schema name of [`FRAME_TOPIC`].
+pub const FRAME_HEADER_SCHEMA: &str = "landing.v1.FrameHeader";
+/// Schema name of whole frames (older recordings, other tools).
 pub const FRAME_SCHEMA: &str = "landing.v1.Frame";
 /// Schema name of [`TRUTH_TOPIC`].
 pub const TRUTH_SCHEMA: &str = "landing.v1.GroundTruth";
-/// Schema name of [`LABELS_TOPIC`].
+/// Schema name of label images in older recordings.
 pub const LABELS_SCHEMA: &str = "landing.v1.CameraImage";
 /// Schema name of [`RESULT_TOPIC`].
 pub const RESULT_SCHEMA: &str = "landing.v1.StreamLandingSitesResponse";
@@ -88,9 +124,15 @@ pub enum Error {
         schema: &'static str,
         reason: String,
     },
-    /// The recording holds no `landing.v1.Frame` message.
-    #[error("no `{FRAME_SCHEMA}` messages (protobuf) found")]
+    /// The recording holds no frame: no header on [`FRAME_TOPIC`], no `foxglove.PointCloud` on
+    /// [`LIDAR_TOPIC`] and no `landing.v1.Frame`.
+    #[error(
+        "no frames: no `{FRAME_HEADER_SCHEMA}` on `{FRAME_TOPIC}`, no `foxglove.PointCloud` on `{LIDAR_TOPIC}`, no `{FRAME_SCHEMA}`"
+    )]
     NoFrames,
+    /// A frame's sensors cannot be placed in a viewer's frame tree.
+    #[error("frame ids: {0}")]
+    FrameId(String),
 }
 
 impl Error {

@@ -6,12 +6,19 @@ use std::path::Path;
 use landing_proto::v1;
 use prost::Message;
 
-use crate::{Error, FRAME_SCHEMA, LABELS_SCHEMA, LABELS_TOPIC, TRUTH_SCHEMA};
+use foxglove::messages as fox;
+
+use crate::convert::{self, FoxgloveFrame, Image};
+use crate::{
+    CALIBRATION_TOPIC, CAMERA_RAW_TOPIC, CAMERA_TOPIC, Error, FRAME_HEADER_SCHEMA, FRAME_SCHEMA,
+    FRAME_TOPIC, LABELS_RAW_TOPIC, LABELS_SCHEMA, LABELS_TOPIC, LIDAR_TOPIC, TF_TOPIC,
+    TRUTH_SCHEMA,
+};
 
 /// One frame of a recording.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RecordedFrame {
-    /// The topic it was recorded on.
+    /// The topic of its scan ([`crate::LIDAR_TOPIC`]), or of the whole `landing.v1.Frame`.
     pub topic: String,
     /// MCAP log time, nanoseconds.
     pub log_time_ns: u64,
@@ -19,11 +26,15 @@ pub struct RecordedFrame {
     pub frame: v1::Frame,
     /// The ground truth logged at the same time, if any.
     pub truth: Option<v1::GroundTruth>,
-    /// The label image logged at the same time on [`LABELS_TOPIC`], if any.
+    /// The true label image logged at the same time on [`LABELS_TOPIC`], if any, with the
+    /// camera's pose and calibration.
     pub labels: Option<v1::CameraImage>,
 }
 
-/// Reads every `landing.v1.Frame` of the MCAP file at `path`, in file order.
+/// Reads every frame of the MCAP file at `path`, in file order: one per log time with a header on
+/// [`crate::FRAME_TOPIC`] or a `foxglove.PointCloud` on [`LIDAR_TOPIC`], put back together with
+/// the cloud, image, calibration and transforms of that log time, and one per whole
+/// `landing.v1.Frame` on any topic.
 pub fn read(path: &Path) -> Result<Vec<RecordedFrame>, Error> {
     let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
     read_bytes(&bytes)
@@ -78,56 +89,184 @@ fn messages(bytes: &[u8]) -> impl Iterator<Item = Result<mcap::Message<'static>,
     })
 }
 
+/// What one log time holds, before the frame is put back together.
+#[derive(Default)]
+struct Moment {
+    header: Option<v1::FrameHeader>,
+    /// The cloud and its MCAP sequence (the frame's, when there is no header).
+    cloud: Option<(fox::PointCloud, u32)>,
+    image: Option<Image>,
+    calibration: Option<fox::CameraCalibration>,
+    transforms: Option<fox::FrameTransforms>,
+    labels: Option<Image>,
+    legacy_labels: Option<v1::CameraImage>,
+    truth: Option<v1::GroundTruth>,
+}
+
+/// The frames in file order: one put together from the Foxglove channels (by the log time of its
+/// header or, from other tools, of its cloud) or a whole `landing.v1.Frame`.
+enum Entry {
+    Foxglove(u64),
+    Whole(RecordedFrame),
+}
+
 fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
-    let mut frames = Vec::new();
-    let mut truths = BTreeMap::new();
-    let mut labels = BTreeMap::new();
+    let mut entries = Vec::new();
+    let mut moments: BTreeMap<u64, Moment> = BTreeMap::new();
     for message in messages(bytes) {
         let message = message?;
-        let schema = message
+        let Some(schema) = message
             .channel
             .schema
             .as_ref()
             .filter(|s| s.encoding == "protobuf")
-            .map(|s| s.name.as_str());
-        let topic = &message.channel.topic;
-        let decode_error = |schema: &'static str, e: prost::DecodeError| Error::Decode {
-            topic: topic.clone(),
-            sequence: message.sequence,
-            schema,
-            reason: e.to_string(),
+            .map(|s| s.name.as_str())
+        else {
+            continue;
         };
-        match schema {
-            Some(FRAME_SCHEMA) => {
-                let frame = v1::Frame::decode(&message.data[..])
-                    .map_err(|e| decode_error(FRAME_SCHEMA, e))?;
-                frames.push(RecordedFrame {
-                    topic: topic.clone(),
-                    log_time_ns: message.log_time,
-                    frame,
-                    truth: None,
-                    labels: None,
-                });
+        let topic = message.channel.topic.as_str();
+        let decode_error = |schema: &'static str| {
+            let topic = topic.to_string();
+            let sequence = message.sequence;
+            move |e: prost::DecodeError| Error::Decode {
+                topic,
+                sequence,
+                schema,
+                reason: e.to_string(),
             }
-            Some(TRUTH_SCHEMA) => {
-                let truth = v1::GroundTruth::decode(&message.data[..])
-                    .map_err(|e| decode_error(TRUTH_SCHEMA, e))?;
-                truths.insert(message.log_time, truth);
+        };
+        macro_rules! decode {
+            ($t:ty, $name:expr) => {
+                <$t>::decode(&message.data[..]).map_err(decode_error($name))?
+            };
+        }
+        let at = message.log_time;
+        match (schema, topic) {
+            (FRAME_SCHEMA, _) => entries.push(Entry::Whole(RecordedFrame {
+                topic: topic.to_string(),
+                log_time_ns: at,
+                frame: decode!(v1::Frame, FRAME_SCHEMA),
+                truth: None,
+                labels: None,
+            })),
+            (FRAME_HEADER_SCHEMA, FRAME_TOPIC) => {
+                let header = decode!(v1::FrameHeader, FRAME_HEADER_SCHEMA);
+                let m = moments.entry(at).or_default();
+                if m.header.is_none() && m.cloud.is_none() {
+                    entries.push(Entry::Foxglove(at));
+                }
+                m.header = Some(header);
             }
-            Some(LABELS_SCHEMA) if topic == LABELS_TOPIC => {
-                let image = v1::CameraImage::decode(&message.data[..])
-                    .map_err(|e| decode_error(LABELS_SCHEMA, e))?;
-                labels.insert(message.log_time, image);
+            ("foxglove.PointCloud", LIDAR_TOPIC) => {
+                let cloud = decode!(fox::PointCloud, "foxglove.PointCloud");
+                let m = moments.entry(at).or_default();
+                if m.header.is_none() && m.cloud.is_none() {
+                    entries.push(Entry::Foxglove(at));
+                }
+                m.cloud = Some((cloud, message.sequence));
+            }
+            ("foxglove.CompressedImage", CAMERA_TOPIC) => {
+                moments.entry(at).or_default().image = Some(Image::Compressed(decode!(
+                    fox::CompressedImage,
+                    "foxglove.CompressedImage"
+                )));
+            }
+            ("foxglove.RawImage", CAMERA_RAW_TOPIC) => {
+                moments.entry(at).or_default().image =
+                    Some(Image::Raw(decode!(fox::RawImage, "foxglove.RawImage")));
+            }
+            ("foxglove.CameraCalibration", CALIBRATION_TOPIC) => {
+                moments.entry(at).or_default().calibration = Some(decode!(
+                    fox::CameraCalibration,
+                    "foxglove.CameraCalibration"
+                ));
+            }
+            ("foxglove.FrameTransforms", TF_TOPIC) => {
+                moments.entry(at).or_default().transforms =
+                    Some(decode!(fox::FrameTransforms, "foxglove.FrameTransforms"));
+            }
+            ("foxglove.CompressedImage", LABELS_TOPIC) => {
+                moments.entry(at).or_default().labels = Some(Image::Compressed(decode!(
+                    fox::CompressedImage,
+                    "foxglove.CompressedImage"
+                )));
+            }
+            ("foxglove.RawImage", LABELS_RAW_TOPIC) => {
+                moments.entry(at).or_default().labels =
+                    Some(Image::Raw(decode!(fox::RawImage, "foxglove.RawImage")));
+            }
+            (LABELS_SCHEMA, LABELS_TOPIC) => {
+                moments.entry(at).or_default().legacy_labels =
+                    Some(decode!(v1::CameraImage, LABELS_SCHEMA));
+            }
+            (TRUTH_SCHEMA, _) => {
+                moments.entry(at).or_default().truth = Some(decode!(v1::GroundTruth, TRUTH_SCHEMA));
             }
             _ => {}
         }
     }
+    let mut frames = Vec::with_capacity(entries.len());
+    for entry in entries {
+        let mut frame = match entry {
+            Entry::Whole(frame) => frame,
+            Entry::Foxglove(at) => assemble(at, &mut moments)?,
+        };
+        if let Some(m) = moments.get_mut(&frame.log_time_ns) {
+            frame.truth = m.truth.take();
+            if frame.labels.is_none() {
+                frame.labels = m.legacy_labels.take();
+            }
+        }
+        frames.push(frame);
+    }
     if frames.is_empty() {
         return Err(Error::NoFrames);
     }
-    for f in &mut frames {
-        f.truth = truths.remove(&f.log_time_ns);
-        f.labels = labels.remove(&f.log_time_ns);
-    }
     Ok(frames)
+}
+
+/// The frame of log time `at` from its Foxglove messages; the label image takes the camera's pose
+/// and calibration. A cloud without a header keeps the cloud's MCAP sequence and time.
+fn assemble(at: u64, moments: &mut BTreeMap<u64, Moment>) -> Result<RecordedFrame, Error> {
+    let m = moments.entry(at).or_default();
+    let (cloud, sequence) = m.cloud.take().unzip();
+    let sequence = sequence.unwrap_or_default();
+    // A scan recorded by another tool, without our header: its MCAP sequence and time.
+    let header = m.header.take().unwrap_or_else(|| v1::FrameHeader {
+        sequence: u64::from(sequence),
+        timestamp: cloud
+            .as_ref()
+            .and_then(|c| c.timestamp)
+            .map(convert::from_fox_time),
+        ..Default::default()
+    });
+    let sequence = header.sequence as u32;
+    let parts = FoxgloveFrame {
+        header,
+        cloud,
+        image: m.image.take(),
+        calibration: m.calibration.take(),
+        transforms: m.transforms.take().unwrap_or_default(),
+    };
+    let invalid = |topic: &str, reason: String| Error::Decode {
+        topic: topic.to_string(),
+        sequence,
+        schema: "foxglove.CameraCalibration",
+        reason,
+    };
+    let frame = convert::frame_from_foxglove(&parts).map_err(|e| invalid(CALIBRATION_TOPIC, e))?;
+    let labels = match m.labels.take() {
+        Some(image) => Some(
+            convert::camera_from_foxglove(&image, parts.calibration.as_ref(), &parts.transforms)
+                .map_err(|e| invalid(CALIBRATION_TOPIC, e))?,
+        ),
+        None => None,
+    };
+    Ok(RecordedFrame {
+        topic: LIDAR_TOPIC.to_string(),
+        log_time_ns: at,
+        frame,
+        truth: None,
+        labels,
+    })
 }

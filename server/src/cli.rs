@@ -42,6 +42,10 @@ pub struct ConfigArgs {
     /// Overrides `server.metrics_listen` ("" disables metrics).
     #[arg(long, value_name = "ADDR")]
     pub metrics_listen: Option<String>,
+    /// Overrides `server.foxglove_listen`: serve the Foxglove live view on HOST:PORT (off by
+    /// default).
+    #[arg(long, value_name = "HOST:PORT")]
+    pub foxglove_listen: Option<String>,
 }
 
 /// `serve` arguments.
@@ -256,6 +260,9 @@ pub fn load_config(args: &ConfigArgs) -> anyhow::Result<Config> {
     }
     if let Some(metrics) = &args.metrics_listen {
         env.push(("LANDING__SERVER__METRICS_LISTEN".into(), metrics.clone()));
+    }
+    if let Some(foxglove) = &args.foxglove_listen {
+        env.push(("LANDING__SERVER__FOXGLOVE_LISTEN".into(), foxglove.clone()));
     }
     let config =
         Config::load(args.config.as_deref(), dedup_last(env)).context("invalid configuration")?;

@@ -85,6 +85,9 @@ pub struct ServerConfig {
     pub listen: String,
     /// Prometheus `/metrics` listen address; "" disables it.
     pub metrics_listen: String,
+    /// Foxglove live view (WebSocket, protocol `foxglove.sdk.v1`) listen address; "" (the
+    /// default) disables it. Viewers see each processed frame's scan, image, poses and sites.
+    pub foxglove_listen: String,
     /// Largest accepted (and sent) message, bytes.
     pub max_request_bytes: u64,
     /// In-flight frames get this long after SIGTERM, seconds.
@@ -96,6 +99,7 @@ impl Default for ServerConfig {
         Self {
             listen: "0.0.0.0:50051".into(),
             metrics_listen: "0.0.0.0:9464".into(),
+            foxglove_listen: String::new(),
             max_request_bytes: 64 * 1024 * 1024,
             shutdown_grace_s: 20.0,
         }
@@ -318,6 +322,7 @@ impl Config {
         if !s.metrics_listen.is_empty() {
             parse_addr("server.metrics_listen", &s.metrics_listen)?;
         }
+        self.foxglove_addr()?;
         if !(1024 * 1024..=1024 * 1024 * 1024).contains(&s.max_request_bytes) {
             return Err(Error::config(
                 "server.max_request_bytes",
@@ -450,6 +455,14 @@ impl Config {
             return Ok(None);
         }
         parse_addr("server.metrics_listen", &self.server.metrics_listen).map(Some)
+    }
+
+    /// The Foxglove live view's listen address, `None` when disabled.
+    pub fn foxglove_addr(&self) -> Result<Option<SocketAddr>, Error> {
+        if self.server.foxglove_listen.is_empty() {
+            return Ok(None);
+        }
+        parse_addr("server.foxglove_listen", &self.server.foxglove_listen).map(Some)
     }
 
     /// The whole config as TOML, as `check-config` prints it.

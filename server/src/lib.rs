@@ -79,6 +79,7 @@ mod error;
 pub mod frame;
 pub mod geodetic;
 mod limit;
+mod live;
 pub mod pipeline;
 pub mod segmentation;
 pub mod server;

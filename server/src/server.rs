@@ -18,6 +18,7 @@ use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 use crate::auth::Auth;
 use crate::config::{Config, read_tokens};
 use crate::limit::RequestLimit;
+use crate::live::LiveView;
 use crate::pipeline::Pipeline;
 use crate::segmentation;
 use crate::service::LandingService;
@@ -31,6 +32,8 @@ pub struct RunningServer {
     pub addr: SocketAddr,
     /// The `/metrics` address, when metrics are enabled.
     pub metrics_addr: Option<SocketAddr>,
+    /// The Foxglove live view's address, when `server.foxglove_listen` is set.
+    pub foxglove_addr: Option<SocketAddr>,
     shutdown: Option<oneshot::Sender<()>>,
     task: tokio::task::JoinHandle<anyhow::Result<()>>,
 }
@@ -58,7 +61,12 @@ pub async fn serve(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     let running = start(config, listener).await?;
-    tracing::info!(addr = %running.addr, metrics = ?running.metrics_addr, "serving landing.v1");
+    tracing::info!(
+        addr = %running.addr,
+        metrics = ?running.metrics_addr,
+        foxglove = ?running.foxglove_addr,
+        "serving landing.v1"
+    );
     let (tx, rx) = oneshot::channel::<()>();
     tokio::spawn(async move {
         shutdown.await;
@@ -127,6 +135,11 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .as_ref()
         .map(TcpListener::local_addr)
         .transpose()?;
+    let live = match config.foxglove_addr()? {
+        Some(a) => Some(Arc::new(LiveView::start(a, metrics.clone()).await?)),
+        None => None,
+    };
+    let foxglove_addr = live.as_ref().map(|l| l.addr);
     let tls = tls_config(&config)?;
     let tokens = if config.auth.tokens_file.as_os_str().is_empty() {
         None
@@ -154,6 +167,7 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         max_request_bytes: config.server.max_request_bytes,
         fusion: config.fusion.params(),
         draining: drain_rx,
+        live: live.clone(),
     };
     let landing = LandingServiceServer::new(service)
         .max_decoding_message_size(max)
@@ -213,6 +227,9 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         tokio::select! {
             r = &mut server => {
                 let _ = metrics_stop_tx.send(());
+                if let Some(live) = &live {
+                    live.stop().await;
+                }
                 return r.context("the gRPC server failed");
             }
             _ = stop_rx => {}
@@ -242,12 +259,16 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
             }
         };
         let _ = metrics_stop_tx.send(());
+        if let Some(live) = &live {
+            live.stop().await;
+        }
         tracing::info!("stopped");
         result
     });
     Ok(RunningServer {
         addr,
         metrics_addr,
+        foxglove_addr,
         shutdown: Some(stop_tx),
         task,
     })

@@ -12,9 +12,18 @@ use tonic::{Request, Response, Status, Streaming};
 
 use crate::auth::Arrived;
 use crate::convert;
+use crate::live::LiveView;
 use crate::status::{to_rpc_status, to_status};
 use crate::telemetry::Rpc;
 use crate::workers::{Dispatcher, Done, FusionTurn, StreamFusion};
+
+/// A stream's frame in flight: its sequence, its computation, and the frame itself when a
+/// live viewer is watching (to be shown with its answer).
+type Pending = (
+    u64,
+    tokio::task::JoinHandle<Done>,
+    Option<(Arc<LiveView>, v1::Frame)>,
+);
 
 /// Whether a stream fuses, as its first message asked.
 enum Fusing {
@@ -34,6 +43,15 @@ pub(crate) struct LandingService {
     pub fusion: landing_fusion::FusionParams,
     /// Flips to true when the server starts draining: open streams stop reading.
     pub draining: watch::Receiver<bool>,
+    /// The Foxglove live view, when `server.foxglove_listen` is set.
+    pub live: Option<Arc<LiveView>>,
+}
+
+impl LandingService {
+    /// The live view, if a viewer is watching: only then is a frame kept to be shown.
+    fn watched(&self) -> Option<Arc<LiveView>> {
+        self.live.as_ref().filter(|l| l.watched()).cloned()
+    }
 }
 
 /// How much earlier than the caller's deadline a frame is given up: a tenth of the timeout, at
@@ -97,17 +115,33 @@ impl v1::landing_service_server::LandingService for LandingService {
         request: Request<v1::DetectLandingSitesRequest>,
     ) -> Result<Response<v1::DetectLandingSitesResponse>, Status> {
         let deadline = deadline_of(&request);
-        let request = request.into_inner();
+        let mut request = request.into_inner();
         let parts = convert::request_parts(&request, &self.dispatcher.pipeline.defaults);
+        let shown = self.watched().zip(request.frame.take());
+        drop(request);
         // Awaited in place: if the caller goes away, tonic drops this future and the frame stops.
         match self
             .dispatcher
             .process(Rpc::Unary, parts, deadline, never(), None)
             .await
         {
-            Done::Computed(out) => Ok(Response::new(v1::DetectLandingSitesResponse {
-                result: Some(v1::FrameResult::from(&*out)),
-            })),
+            Done::Computed(out) => {
+                let result = v1::FrameResult::from(&*out);
+                if let Some((live, frame)) = shown {
+                    live.show(
+                        frame,
+                        v1::StreamLandingSitesResponse {
+                            sequence: result.sequence,
+                            outcome: Some(v1::stream_landing_sites_response::Outcome::Result(
+                                result.clone(),
+                            )),
+                        },
+                    );
+                }
+                Ok(Response::new(v1::DetectLandingSitesResponse {
+                    result: Some(result),
+                }))
+            }
             Done::Failed(e) => Err(to_status(&e)),
             Done::Skipped { .. } => Err(Status::internal("a unary frame cannot be skipped")),
         }
@@ -123,8 +157,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         let mut inbound = request.into_inner();
         let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
         // Frames in flight for this stream, in arrival order; its bound is the BLOCK back-pressure.
-        let (pending_tx, mut pending_rx) =
-            mpsc::channel::<(u64, tokio::task::JoinHandle<Done>)>(self.stream_buffer);
+        let (pending_tx, mut pending_rx) = mpsc::channel::<Pending>(self.stream_buffer);
         // (arrival index, sequence) of the newest frame, for LATEST.
         let (latest_tx, latest_rx) = watch::channel((0u64, 0u64));
         let (cancel_tx, mut cancel_rx) = watch::channel(false);
@@ -133,6 +166,7 @@ impl v1::landing_service_server::LandingService for LandingService {
         // answered.
         let (broken_tx, mut broken_rx) = tokio::sync::oneshot::channel::<Status>();
         let dispatcher = self.dispatcher.clone();
+        let service = self.clone();
         let fusion_defaults = self.fusion;
         let mut draining = self.draining.clone();
         dispatcher.metrics.streams(1.0);
@@ -161,7 +195,7 @@ impl v1::landing_service_server::LandingService for LandingService {
                     }
                     _ = cancel_rx.changed() => break,
                 };
-                let request = match message {
+                let mut request = match message {
                     Ok(Some(r)) => r,
                     Ok(None) => break,
                     Err(status) => {
@@ -205,6 +239,7 @@ impl v1::landing_service_server::LandingService for LandingService {
                         )
                     }
                 };
+                let shown = service.watched().zip(request.frame.take());
                 drop(request);
                 let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =
                     if latest {
@@ -227,7 +262,7 @@ impl v1::landing_service_server::LandingService for LandingService {
                     superseded,
                     turn,
                 ));
-                if pending_tx.send((sequence, job)).await.is_err() {
+                if pending_tx.send((sequence, job, shown)).await.is_err() {
                     break;
                 }
             }
@@ -235,13 +270,13 @@ impl v1::landing_service_server::LandingService for LandingService {
 
         // Writer: answers in order, one response per frame; on cancellation aborts what is left.
         tokio::spawn(async move {
-            let abort_rest = |rx: &mut mpsc::Receiver<(u64, tokio::task::JoinHandle<Done>)>| {
+            let abort_rest = |rx: &mut mpsc::Receiver<Pending>| {
                 rx.close();
-                while let Ok((_, job)) = rx.try_recv() {
+                while let Ok((_, job, _)) = rx.try_recv() {
                     job.abort();
                 }
             };
-            while let Some((sequence, mut job)) = pending_rx.recv().await {
+            while let Some((sequence, mut job, shown)) = pending_rx.recv().await {
                 let done = tokio::select! {
                     joined = &mut job => match joined {
                         Ok(done) => done,
@@ -252,11 +287,11 @@ impl v1::landing_service_server::LandingService for LandingService {
                         break;
                     }
                 };
-                if out_tx
-                    .send(Ok(stream_response(sequence, done)))
-                    .await
-                    .is_err()
-                {
+                let response = stream_response(sequence, done);
+                if let Some((live, frame)) = shown {
+                    live.show(frame, response.clone());
+                }
+                if out_tx.send(Ok(response)).await.is_err() {
                     break;
                 }
             }

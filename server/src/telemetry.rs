@@ -193,6 +193,14 @@ impl Metrics {
                 metrics::Unit::Bytes,
                 "Memory the open fusion maps hold (cells and kept obstacle rays)."
             );
+            metrics::describe_counter!(
+                "landing_live_view_frames_total",
+                "Frames published to the Foxglove live view (server.foxglove_listen)."
+            );
+            metrics::describe_counter!(
+                "landing_live_view_dropped_total",
+                "Frames the live view dropped, oldest first, because its viewers fell behind."
+            );
             metrics::describe_gauge!(
                 "landing_build_info",
                 "Always 1; the labels name the server version and the SHA-256 of the segmentation model file (\"\" without a model)."
@@ -224,6 +232,12 @@ impl Metrics {
                 "landing_fusion_map_bytes",
             ] {
                 metrics::gauge!(gauge).set(0.0);
+            }
+            for counter in [
+                "landing_live_view_frames_total",
+                "landing_live_view_dropped_total",
+            ] {
+                metrics::counter!(counter).absolute(0);
             }
             metrics::gauge!(
                 "landing_build_info",
@@ -277,6 +291,16 @@ impl Metrics {
     /// Moves the fusion maps' memory by `delta` bytes.
     pub fn fusion_bytes(&self, delta: f64) {
         self.with(|| metrics::gauge!("landing_fusion_map_bytes").increment(delta));
+    }
+
+    /// Counts a frame the live view published.
+    pub fn live_view_published(&self) {
+        self.with(|| metrics::counter!("landing_live_view_frames_total").increment(1));
+    }
+
+    /// Counts a frame the live view dropped because its viewers fell behind.
+    pub fn live_view_dropped(&self) {
+        self.with(|| metrics::counter!("landing_live_view_dropped_total").increment(1));
     }
 
     /// The Prometheus text exposition of every metric.

@@ -345,25 +345,3 @@ pub fn encode_label_png(img: &Rendered) -> Result<Vec<u8>, SimError> {
         image::ExtendedColorType::L8,
     )
 }
-
-/// A colour per class for previews.
-pub fn class_color(class: u8) -> [u8; 3] {
-    const C: [[u8; 3]; 15] = [
-        [0, 0, 0],
-        [135, 190, 235],
-        [90, 90, 80],
-        [170, 80, 60],
-        [200, 200, 200],
-        [230, 160, 40],
-        [60, 140, 230],
-        [240, 240, 60],
-        [80, 220, 220],
-        [200, 80, 200],
-        [240, 110, 110],
-        [130, 70, 30],
-        [120, 0, 0],
-        [20, 60, 200],
-        [40, 170, 40],
-    ];
-    C[usize::from(class).min(14)]
-}

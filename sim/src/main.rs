@@ -5,8 +5,9 @@ use std::time::Instant;
 
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use landing_recording::scene::class_color;
 use landing_sim::camera::{CameraConfig, Intrinsics, render};
-use landing_sim::dataset::{DatasetConfig, Split, class_color, write_dataset};
+use landing_sim::dataset::{DatasetConfig, Split, write_dataset};
 use landing_sim::flight::{FlightConfig, ViewConfig, lidar_pose, random_view, view_of};
 use landing_sim::lidar::{LidarConfig, scan};
 use landing_sim::noise::PoseNoise;

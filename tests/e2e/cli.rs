@@ -6,7 +6,7 @@ use landing_cli::exit;
 use landing_cli::render::{RenderConfig, STAR_YELLOW, render};
 use landing_client::v1::{self, SegmentationMode};
 use landing_client::{FrameBuilder, PointCloudBuilder, unpack_point_cloud};
-use landing_recording::RESULT_TOPIC;
+use landing_recording::{ANNOTATIONS_TOPIC, RESULT_TOPIC, SITES_TOPIC};
 use prost::Message;
 use serde_json::Value;
 
@@ -217,9 +217,23 @@ async fn replay_writes_json_lines_and_mcap_equal_to_the_pipeline() {
     }
 
     let bytes = std::fs::read(&mcap).expect("mcap");
-    let messages: Vec<_> = mcap::MessageStream::new(&bytes)
+    let all: Vec<_> = mcap::MessageStream::new(&bytes)
         .expect("mcap")
         .map(|m| m.expect("message"))
+        .collect();
+    let count = |topic: &str| all.iter().filter(|m| m.channel.topic == topic).count();
+    // Each answer drawn in 3-D and over its camera image.
+    assert_eq!(count(SITES_TOPIC), expected.len());
+    assert_eq!(count(ANNOTATIONS_TOPIC), expected.len());
+    // The inputs come along, so the output replays on its own: the same frames.
+    let replayed = landing_recording::read_bytes(&bytes).expect("the output is a recording");
+    let frames = |r: &[landing_recording::RecordedFrame]| -> Vec<v1::Frame> {
+        r.iter().map(|r| r.frame.clone()).collect()
+    };
+    assert_eq!(frames(&replayed), frames(&s.frames[..expected.len()]));
+    let messages: Vec<_> = all
+        .iter()
+        .filter(|m| m.channel.topic == RESULT_TOPIC)
         .collect();
     assert_eq!(messages.len(), expected.len());
     for ((m, want), rec) in messages.iter().zip(&expected).zip(&s.frames) {

@@ -9,6 +9,7 @@ mod detect;
 mod errors;
 mod fusion;
 mod health_reflection;
+mod live_view;
 mod malformed;
 mod metrics;
 mod overload;

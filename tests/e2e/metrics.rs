@@ -8,7 +8,7 @@ use landing_server::telemetry::scrape;
 use crate::support::{TestServer, mode, scene, server_config};
 
 /// Every metric and its Prometheus type.
-const METRICS: [(&str, &str); 10] = [
+const METRICS: [(&str, &str); 12] = [
     ("landing_frames_total", "counter"),
     ("landing_frame_seconds", "histogram"),
     ("landing_stage_seconds", "histogram"),
@@ -18,6 +18,8 @@ const METRICS: [(&str, &str); 10] = [
     ("landing_streams_open", "gauge"),
     ("landing_fusion_maps_open", "gauge"),
     ("landing_fusion_map_bytes", "gauge"),
+    ("landing_live_view_frames_total", "counter"),
+    ("landing_live_view_dropped_total", "counter"),
     ("landing_build_info", "gauge"),
 ];
 const RPCS: [&str; 2] = ["unary", "stream"];

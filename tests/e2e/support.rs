@@ -103,6 +103,11 @@ impl TestServer {
         self.running.as_ref()?.metrics_addr
     }
 
+    /// The Foxglove live view's address, when the config enables it.
+    pub fn foxglove_addr(&self) -> Option<std::net::SocketAddr> {
+        self.running.as_ref()?.foxglove_addr
+    }
+
     /// Client settings for this server (no retries, so tests see every refusal).
     pub fn client_config(&self) -> ClientConfig {
         let mut c = ClientConfig::new(self.url.clone());
