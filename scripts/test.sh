@@ -36,7 +36,7 @@ step "release binaries"
 cargo build --release --locked -p landing-server -p landing-cli -p landing-sim --bins
 bin=$(release_bin_dir)  # target/release unless CARGO_TARGET_DIR or a cargo config says otherwise
 
-step "independent MCAP reader (Python mcap + protobuf decoder)"
+step "independent MCAP reader (Python mcap + protobuf decoder + Foxglove's own schema classes)"
 py=$(bash scripts/python-env.sh checks sim/tests/python/requirements.txt client/examples/python/requirements.txt)
 tmp=$(mktemp -d)
 server_pid=""
@@ -57,6 +57,9 @@ step "a client that is not ours (Python grpcio) and the evaluation slice, agains
 server_pid=$!
 for _ in $(seq 1 150); do "$bin/landing" info >/dev/null 2>&1 && break; sleep 0.2; done
 "$py" client/examples/python/detect_one_frame.py --server 127.0.0.1:50051 --recording samples/rooftops.mcap
+# A replay's output: the inputs and each answer drawn, every channel read with the stock readers.
+"$bin/landing" replay samples/rooftops.mcap --out "$tmp/replay.mcap"
+"$py" sim/tests/python/check_mcap.py "$tmp/replay.mcap" --replay
 # The stock reflection client (grpcio-reflection: v1alpha only) describes and calls the API.
 "$py" client/examples/python/reflect.py --server 127.0.0.1:50051
 "$bin/landing" eval --scenarios small --out "$tmp/eval-small" --gate model

@@ -107,7 +107,7 @@ struct Moment {
 /// header or, from other tools, of its cloud) or a whole `landing.v1.Frame`.
 enum Entry {
     Foxglove(u64),
-    Whole(RecordedFrame),
+    Whole(Box<RecordedFrame>),
 }
 
 fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
@@ -142,13 +142,13 @@ fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
         }
         let at = message.log_time;
         match (schema, topic) {
-            (FRAME_SCHEMA, _) => entries.push(Entry::Whole(RecordedFrame {
+            (FRAME_SCHEMA, _) => entries.push(Entry::Whole(Box::new(RecordedFrame {
                 topic: topic.to_string(),
                 log_time_ns: at,
                 frame: decode!(v1::Frame, FRAME_SCHEMA),
                 truth: None,
                 labels: None,
-            })),
+            }))),
             (FRAME_HEADER_SCHEMA, FRAME_TOPIC) => {
                 let header = decode!(v1::FrameHeader, FRAME_HEADER_SCHEMA);
                 let m = moments.entry(at).or_default();
@@ -208,7 +208,7 @@ fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     let mut frames = Vec::with_capacity(entries.len());
     for entry in entries {
         let mut frame = match entry {
-            Entry::Whole(frame) => frame,
+            Entry::Whole(frame) => *frame,
             Entry::Foxglove(at) => assemble(at, &mut moments)?,
         };
         if let Some(m) = moments.get_mut(&frame.log_time_ns) {

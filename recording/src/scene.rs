@@ -282,7 +282,7 @@ fn footprint_box(
     let (a, b) = (pts.first()?, pts.get(1)?);
     let (dx, dy) = (b.x - a.x, b.y - a.y);
     let len = dx.hypot(dy);
-    if !(len > 0.0) {
+    if len == 0.0 || !len.is_finite() {
         return None;
     }
     let (ux, uy) = (dx / len, dy / len);
@@ -336,7 +336,7 @@ impl Pinhole {
         let pose = camera.pose.as_ref()?;
         let q = pose.orientation?;
         let n = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
-        if !(n > 0.0) {
+        if n == 0.0 || !n.is_finite() {
             return None;
         }
         let p = pose.position.unwrap_or_default();

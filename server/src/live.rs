@@ -114,9 +114,19 @@ fn now_ns() -> u64 {
 type Shown = (v1::Frame, v1::StreamLandingSitesResponse);
 
 #[derive(Default)]
-struct Queue {
-    frames: VecDeque<Shown>,
+struct Queue<T = Shown> {
+    frames: VecDeque<T>,
     stopped: bool,
+}
+
+impl<T> Queue<T> {
+    /// Appends `item`, dropping the oldest when [`QUEUE_FRAMES`] are waiting; says whether it
+    /// dropped one.
+    fn push(&mut self, item: T) -> bool {
+        let dropped = self.frames.len() >= QUEUE_FRAMES && self.frames.pop_front().is_some();
+        self.frames.push_back(item);
+        dropped
+    }
 }
 
 /// The running live view, until [`LiveView::stop`].
@@ -183,8 +193,7 @@ impl LiveView {
     pub fn show(&self, frame: v1::Frame, response: v1::StreamLandingSitesResponse) {
         let (lock, wake) = &*self.queue;
         let mut q = lock.lock().unwrap_or_else(|e| e.into_inner());
-        let dropped = q.frames.len() >= QUEUE_FRAMES && q.frames.pop_front().is_some();
-        q.frames.push_back((frame, response));
+        let dropped = q.push((frame, response));
         drop(q);
         wake.notify_one();
         if dropped {
@@ -235,5 +244,22 @@ fn publish_loop(queue: &(Mutex<Queue>, Condvar), channels: &Channels, metrics: &
             channels.publish(&frame, &response);
             metrics.live_view_published();
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_full_queue_drops_its_oldest_frame() {
+        let mut q = Queue::<u32>::default();
+        for i in 0..QUEUE_FRAMES as u32 {
+            assert!(!q.push(i));
+        }
+        assert!(q.push(99));
+        assert_eq!(q.frames.len(), QUEUE_FRAMES);
+        assert_eq!(q.frames.front(), Some(&1));
+        assert_eq!(q.frames.back(), Some(&99));
     }
 }
