@@ -369,7 +369,9 @@ impl Pinhole {
     }
 }
 
-/// `v` rotated by the unit quaternion `q` (x, y, z, w).
+/// `v` rotated by the unit quaternion `q` (x, y, z, w). The same as
+/// `landing_client::RigidTransform::rotate`, which `landing render` projects with; the format
+/// cannot call it, since depending on the SDK would put the client into the simulator's tree.
 fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
     let [x, y, z, w] = q;
     // t = 2 (q.xyz × v); v' = v + w t + q.xyz × t

@@ -54,13 +54,17 @@ impl Channels {
 
     /// Whether any viewer is subscribed to any channel.
     fn watched(&self) -> bool {
+        self.sensors_watched() || self.sites.has_sinks() || self.annotations.has_sinks()
+    }
+
+    /// Whether any viewer is subscribed to the frame's own data (scan, image, calibration,
+    /// poses): only then is the frame split into Foxglove messages, which copies its bytes.
+    fn sensors_watched(&self) -> bool {
         self.cloud.has_sinks()
             || self.image.has_sinks()
             || self.raw_image.has_sinks()
             || self.calibration.has_sinks()
             || self.transforms.has_sinks()
-            || self.sites.has_sinks()
-            || self.annotations.has_sinks()
     }
 
     /// Converts and logs one answered frame, each message only if someone subscribed to it.
@@ -71,9 +75,12 @@ impl Channels {
             .map(recording::log_time_ns)
             .filter(|&t| t > 0)
             .unwrap_or_else(now_ns);
-        match recording::frame_to_foxglove(frame) {
-            Ok(parts) => {
-                if let Some(cloud) = parts.cloud.as_ref().filter(|_| self.cloud.has_sinks()) {
+        match self
+            .sensors_watched()
+            .then(|| recording::frame_to_foxglove(frame))
+        {
+            Some(Ok(parts)) => {
+                if let Some(cloud) = &parts.cloud {
                     self.cloud.log_with_time(cloud, at);
                 }
                 match &parts.image {
@@ -88,7 +95,8 @@ impl Channels {
             }
             // A frame a viewer cannot place (two sensors, one name) is still answered; only its
             // sensor data is not shown.
-            Err(e) => tracing::debug!(error = %e, "live view: frame not shown"),
+            Some(Err(e)) => tracing::debug!(error = %e, "live view: frame not shown"),
+            None => {}
         }
         if self.sites.has_sinks() {
             self.sites.log_with_time(&scene::sites_scene(response), at);
