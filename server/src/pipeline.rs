@@ -16,7 +16,7 @@ pub use crate::frame::{
     CameraImage, Cloud, Frame, FrameOptions, ImagePixels, Intrinsics, SegmentationMode,
 };
 use crate::geodetic::{Geodetic, enu_to_geodetic};
-use crate::segmentation::{self, Segmenter};
+use crate::segmentation::{self, PointMask, Segmenter};
 
 /// Time spent in each step; `None` for steps that did not run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -211,6 +211,7 @@ pub fn run_pipeline(
         relative_to(&world, origin),
         options,
         pipeline,
+        PointMask::Fused,
     )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
@@ -274,7 +275,16 @@ pub fn run_fused(
     };
     let origin = map.origin_for(&scan);
     let by = to_local(origin) * correction;
-    let mut c = classify(frame, &by, relative_to(&points, origin), options, pipeline)?;
+    // The votes of every frame that saw a cell guard its class: the points take the finest
+    // mask's classes (see PointMask).
+    let mut c = classify(
+        frame,
+        &by,
+        relative_to(&points, origin),
+        options,
+        pipeline,
+        PointMask::Finest,
+    )?;
     let map_start = Instant::now();
     let reset = map.insert(Scan {
         classes: c.classes.as_deref(),
@@ -334,15 +344,17 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points per the mode. `world` is the cloud in
-/// the coordinates the frame's poses give once moved by `by` (frame-local ones from the callers
-/// above); the frame itself is not copied.
+/// Decodes the frame's images and classifies its points per the mode (`points`: which of the
+/// model's masks, see [`PointMask`]). `world` is the cloud in the coordinates the frame's poses
+/// give once moved by `by` (frame-local ones from the callers above); the frame itself is not
+/// copied.
 fn classify(
     frame: &Frame,
     by: &Isometry3<f64>,
     world: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
+    points: PointMask,
 ) -> Result<Classified, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
@@ -369,7 +381,8 @@ fn classify(
                 // resolve_mode checked both; keep the error rather than panic.
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
-            let out = segmenter.classify(camera, by * camera.pose, rgb, &world, landable)?;
+            let out =
+                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, points)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);

@@ -134,7 +134,8 @@ impl Segmenter {
 
     /// Segments the decoded `image` at every input size, makes unknown the landable pixels the
     /// model is not confident enough in (`segmentation.min_confidence`), and fuses the masks (a
-    /// pixel is landable only where every size says so), then classifies as
+    /// pixel is landable only where every size says so). The obstacle rays always come from the
+    /// fused mask; the points take their classes from the mask `points` names, then as
     /// [`classify_with_mask`] does.
     pub fn classify(
         &self,
@@ -143,6 +144,7 @@ impl Segmenter {
         image: &RgbImage,
         world_points: &[[f32; 3]],
         landable: &[u8],
+        points: PointMask,
     ) -> Result<Classified, Error> {
         let t0 = Instant::now();
         let session =
@@ -168,11 +170,30 @@ impl Segmenter {
         let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
         let segmentation = t0.elapsed();
+        let point_mask = match points {
+            PointMask::Fused => &mask,
+            PointMask::Finest => &masks[0],
+        };
         Ok(Classified {
             segmentation,
-            ..classify_with_mask(camera, pose, &mask, world_points, landable)
+            ..classify_with_masks(camera, pose, point_mask, &mask, world_points, landable)
         })
     }
+}
+
+/// Which of a frame's masks gives its points their classes (the polygons); the obstacle rays,
+/// which safe circles keep clear of, always come from the fused mask.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PointMask {
+    /// The masks of every input size fused: a point is landable only where every size says so.
+    /// A frame judged alone takes it (one frame's miss would be an unsafe site).
+    Fused,
+    /// The first (finest) input size's mask alone, the one with the highest rooftop recall. A
+    /// fused stream takes it: there a cell's class is the votes of every frame that saw it, an
+    /// obstacle vote outweighing several landable ones, so the guard's lost recall buys no
+    /// safety the votes and the keep-out footprints do not already give (EVALUATION.md,
+    /// "Approach fusion").
+    Finest,
 }
 
 /// Whether a class is an obstacle for landing: any class outside `landable` but unknown (0),
@@ -191,6 +212,19 @@ pub fn classify_with_mask(
     world_points: &[[f32; 3]],
     landable: &[u8],
 ) -> Classified {
+    classify_with_masks(camera, pose, mask, mask, world_points, landable)
+}
+
+/// [`classify_with_mask`] with the points' classes from `point_mask` and the obstacle rays from
+/// `obstacle_mask` (both stretched over `camera`'s image).
+fn classify_with_masks(
+    camera: &CameraImage,
+    pose: Isometry3<f64>,
+    point_mask: &ClassMask,
+    obstacle_mask: &ClassMask,
+    world_points: &[[f32; 3]],
+    landable: &[u8],
+) -> Classified {
     let t = Instant::now();
     let k = camera.intrinsics;
     let model = CameraModel {
@@ -202,8 +236,8 @@ pub fn classify_with_mask(
         width: k.width,
         height: k.height,
     };
-    let classes = classify_points(world_points, &model, mask);
-    let obstacles = ObstacleRays::new(&model, mask, world_points, obstacle_test(landable));
+    let classes = classify_points(world_points, &model, point_mask);
+    let obstacles = ObstacleRays::new(&model, obstacle_mask, world_points, obstacle_test(landable));
     Classified {
         classes,
         obstacles,

@@ -146,3 +146,72 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
     assert_eq!(defaults.register_scans, Some(configured.register_scans));
     server.stop().await;
 }
+
+/// A fused stream's points take the finest input size's classes (the votes of every frame that
+/// sees a cell guard them), while its keep-out footprints keep every size's obstacles, as a
+/// frame judged alone does: on a real frame the finest mask calls more points landable, never
+/// fewer, and the obstacle rays are the same.
+#[test]
+fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
+    use landing_server::segmentation::{self, PointMask};
+
+    let server_config = crate::support::server_config();
+    if !server_config.segmentation.enabled {
+        eprintln!("skipped: no model or ONNX Runtime library");
+        return;
+    }
+    let segmenter = segmentation::Segmenter::load(&server_config.segmentation).unwrap();
+    let request = v1::DetectLandingSitesRequest {
+        frame: Some(scene(34).frames[2].frame.clone()),
+        options: Some(mode(SegmentationMode::Model)),
+    };
+    let defaults = landing_geometry::Params::default();
+    let (frame, options) = convert::request_parts(&request, &defaults).unwrap();
+    let camera = frame.image.as_ref().unwrap();
+    let rgb = segmentation::decode(camera).unwrap();
+    let pose = frame.cloud.pose;
+    let points: Vec<[f32; 3]> = frame
+        .cloud
+        .points
+        .iter()
+        .map(|p| {
+            (pose * nalgebra::Point3::from(*p))
+                .coords
+                .map(|v| v as f32)
+                .into()
+        })
+        .collect();
+    let camera_pose = camera.pose;
+    let landable = &options.params.landable_classes;
+    let classify = |mask| {
+        segmenter
+            .classify(camera, camera_pose, &rgb, &points, landable, mask)
+            .unwrap()
+    };
+    let (guarded, finest) = (classify(PointMask::Fused), classify(PointMask::Finest));
+    let is_landable = |c: &u8| landable.contains(c);
+    for (i, (g, f)) in guarded.classes.iter().zip(&finest.classes).enumerate() {
+        assert!(
+            !is_landable(g) || is_landable(f),
+            "point {i}: guard {g}, finest {f}"
+        );
+    }
+    let count = |c: &[u8]| c.iter().filter(|c| is_landable(c)).count();
+    assert!(
+        count(&finest.classes) > count(&guarded.classes),
+        "the finest mask alone has the higher rooftop recall: {} vs {}",
+        count(&finest.classes),
+        count(&guarded.classes)
+    );
+    // The roof the drone approaches: a plane through the lowest tenth of the scan.
+    let mut heights: Vec<f64> = points.iter().map(|p| f64::from(p[2])).collect();
+    heights.sort_by(f64::total_cmp);
+    let roof = [0.0, 0.0, heights[heights.len() / 10]];
+    let plane = (roof, [0.0, 0.0, 1.0], [-1e4, -1e4, 1e4, 1e4]);
+    let guarded_disks = guarded.obstacles.on_plane(plane.0, plane.1, plane.2);
+    assert!(!guarded_disks.is_empty());
+    assert_eq!(
+        guarded_disks,
+        finest.obstacles.on_plane(plane.0, plane.1, plane.2)
+    );
+}
