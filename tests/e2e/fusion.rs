@@ -1,6 +1,7 @@
 //! Approach fusion over a real stream: answers come from the stream's map, equal to the
 //! in-process fused pipeline frame by frame; the map resets on request; bad options name their
-//! field; the defaults are reported.
+//! field; the defaults are reported; a fused frame's points take the finest segmentation mask
+//! while its keep-out footprints keep every size's obstacles.
 
 use landing_client::v1::{self, SegmentationMode};
 use landing_client::{FrameOutcome, StreamConfig};
@@ -181,11 +182,10 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
                 .into()
         })
         .collect();
-    let camera_pose = camera.pose;
     let landable = &options.params.landable_classes;
     let classify = |mask| {
         segmenter
-            .classify(camera, camera_pose, &rgb, &points, landable, mask)
+            .classify(camera, camera.pose, &rgb, &points, landable, mask)
             .unwrap()
     };
     let (guarded, finest) = (classify(PointMask::Fused), classify(PointMask::Finest));
