@@ -344,8 +344,8 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points per the mode (`points`: which of the
-/// model's masks, see [`PointMask`]). `world` is the cloud in the coordinates the frame's poses
+/// Decodes the frame's images and classifies its points per the mode (`point_mask`: which of
+/// the model's masks, see [`PointMask`]). `world` is the cloud in the coordinates the frame's poses
 /// give once moved by `by` (frame-local ones from the callers above); the frame itself is not
 /// copied.
 fn classify(
@@ -354,7 +354,7 @@ fn classify(
     world: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
-    points: PointMask,
+    point_mask: PointMask,
 ) -> Result<Classified, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
@@ -382,7 +382,7 @@ fn classify(
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
             let out =
-                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, points)?;
+                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, point_mask)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);

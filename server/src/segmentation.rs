@@ -135,7 +135,7 @@ impl Segmenter {
     /// Segments the decoded `image` at every input size, makes unknown the landable pixels the
     /// model is not confident enough in (`segmentation.min_confidence`), and fuses the masks (a
     /// pixel is landable only where every size says so). The obstacle rays always come from the
-    /// fused mask; the points take their classes from the mask `points` names, then as
+    /// fused mask; the points take their classes from the mask `point_mask` names, then as
     /// [`classify_with_mask`] does.
     pub fn classify(
         &self,
@@ -144,7 +144,7 @@ impl Segmenter {
         image: &RgbImage,
         world_points: &[[f32; 3]],
         landable: &[u8],
-        points: PointMask,
+        point_mask: PointMask,
     ) -> Result<Classified, Error> {
         let t0 = Instant::now();
         let session =
@@ -170,13 +170,13 @@ impl Segmenter {
         let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
         let segmentation = t0.elapsed();
-        let point_mask = match points {
+        let for_points = match point_mask {
             PointMask::Fused => &mask,
             PointMask::Finest => &masks[0],
         };
         Ok(Classified {
             segmentation,
-            ..classify_with_masks(camera, pose, point_mask, &mask, world_points, landable)
+            ..classify_with_masks(camera, pose, for_points, &mask, world_points, landable)
         })
     }
 }
@@ -192,7 +192,7 @@ pub enum PointMask {
     /// fused stream takes it: there a cell's class is the votes of every frame that saw it, an
     /// obstacle vote outweighing several landable ones, so the guard's lost recall buys no
     /// safety the votes and the keep-out footprints do not already give (EVALUATION.md,
-    /// "Approach fusion").
+    /// "Fused points from the finest mask").
     Finest,
 }
 

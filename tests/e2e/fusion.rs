@@ -6,7 +6,7 @@
 use landing_client::v1::{self, SegmentationMode};
 use landing_client::{FrameOutcome, StreamConfig};
 use landing_server::convert;
-use landing_server::pipeline::{StreamMap, run_fused};
+use landing_server::pipeline::{StreamMap, run_fused, to_world};
 
 use crate::support::{TestServer, mode, scene, stream_with, untimed};
 
@@ -170,17 +170,9 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
     let (frame, options) = convert::request_parts(&request, &defaults).unwrap();
     let camera = frame.image.as_ref().unwrap();
     let rgb = segmentation::decode(camera).unwrap();
-    let pose = frame.cloud.pose;
-    let points: Vec<[f32; 3]> = frame
-        .cloud
-        .points
+    let points: Vec<[f32; 3]> = to_world(&frame.cloud)
         .iter()
-        .map(|p| {
-            (pose * nalgebra::Point3::from(*p))
-                .coords
-                .map(|v| v as f32)
-                .into()
-        })
+        .map(|p| p.map(|v| v as f32))
         .collect();
     let landable = &options.params.landable_classes;
     let classify = |mask| {
