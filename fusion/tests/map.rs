@@ -1,7 +1,7 @@
 //! The fusion map alone: class evidence, resets, bounds in cells and time, keep-out memory, and
 //! independence from the world origin.
 
-use landing_fusion::{FusionMap, FusionParams, Reset, Scan};
+use landing_fusion::{FusionMap, FusionParams, Reset, Scan, View};
 use proptest::prelude::*;
 
 const ROOFTOP: u8 = 4;
@@ -186,6 +186,57 @@ fn answers_hold_only_the_cells_inside_the_bounds() {
 }
 
 #[test]
+fn a_cell_is_landable_only_once_a_fine_view_saw_it() {
+    let pts = roof([0.0; 3]);
+    let max = FusionParams::default().max_footprint_m;
+    let rooftop = vec![ROOFTOP; pts.len()];
+    let mut ac = rooftop.clone();
+    ac[210] = AC_UNIT;
+    // A far view: its pixels cover more of the roof than the rule allows, but on the near
+    // half (y < 5 m); it sees nothing past x = 8 m.
+    let far = |p: &[f64; 3]| (p[0] < 8.0).then_some(if p[1] < 5.0 { max } else { max * 1.5 });
+    let mut m = map();
+    for k in 0..5 {
+        m.insert(Scan {
+            view: Some(View(&far)),
+            ..scan(
+                f64::from(k) * 0.1,
+                &pts,
+                if k == 2 { &ac } else { &rooftop },
+            )
+        });
+    }
+    assert_eq!(class_at(&m, pts[10]), ROOFTOP, "seen at the limit");
+    assert_eq!(class_at(&m, pts[300]), 0, "only coarse views: unknown");
+    assert_eq!(class_at(&m, pts[19]), 0, "never in view: unknown");
+    // Obstacle votes count from any view.
+    assert_eq!(class_at(&m, pts[210]), AC_UNIT);
+    // A near view resolves every cell it sees, not only those its scan's points fell in.
+    let near = |p: &[f64; 3]| (p[0] < 8.0).then_some(max / 4.0);
+    let few = &pts[..1];
+    m.insert(Scan {
+        view: Some(View(&near)),
+        ..scan(0.5, few, &rooftop[..1])
+    });
+    assert_eq!(class_at(&m, pts[300]), ROOFTOP);
+    assert_eq!(class_at(&m, pts[19]), 0, "still never in view");
+    // With the rule off, or with classes that came from no camera, the votes decide alone.
+    let off = FusionParams {
+        max_footprint_m: 0.0,
+        ..FusionParams::default()
+    };
+    for (params, view) in [(off, Some(View(&far))), (FusionParams::default(), None)] {
+        let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+        m.insert(Scan {
+            view,
+            ..scan(0.0, &pts, &rooftop)
+        });
+        assert_eq!(class_at(&m, pts[300]), ROOFTOP);
+        assert_eq!(class_at(&m, pts[19]), ROOFTOP);
+    }
+}
+
+#[test]
 fn cells_are_bounded_in_number_and_time() {
     let params = FusionParams {
         max_cells: 1_000,
@@ -264,6 +315,12 @@ fn bad_parameters_name_their_field() {
     })
     .unwrap_err();
     assert!(err.to_string().contains("max_jump_m"), "{err}");
+    let err = FusionMap::<u32>::new(FusionParams {
+        max_footprint_m: -0.1,
+        ..FusionParams::default()
+    })
+    .unwrap_err();
+    assert_eq!(err.field(), "max_pixel_footprint_m");
 }
 
 proptest! {

@@ -43,6 +43,9 @@ pub struct FusionConfig {
     pub obstacle_weight: u32,
     /// Lay each scan onto the map before fusing it (point-to-plane registration).
     pub register_scans: bool,
+    /// A cell is landable only once a camera pixel of at most this size on the roof classified
+    /// it, metres (0: off).
+    pub max_pixel_footprint_m: f64,
 }
 
 impl Default for FusionConfig {
@@ -57,6 +60,7 @@ impl Default for FusionConfig {
             max_jump_m: p.max_jump_m,
             obstacle_weight: p.obstacle_weight,
             register_scans: p.register,
+            max_pixel_footprint_m: p.max_footprint_m,
         }
     }
 }
@@ -73,6 +77,7 @@ impl FusionConfig {
             max_jump_m: self.max_jump_m,
             obstacle_weight: self.obstacle_weight,
             register: self.register_scans,
+            max_footprint_m: self.max_pixel_footprint_m,
         }
     }
 }

@@ -756,6 +756,7 @@ pub fn fusion_map(
         .map_or(p.keep_out_frames, |v| v as usize);
     p.max_jump_m = asked.max_jump_m.unwrap_or(p.max_jump_m);
     p.register = asked.register_scans.unwrap_or(p.register);
+    p.max_footprint_m = asked.max_pixel_footprint_m.unwrap_or(p.max_footprint_m);
     StreamMap::new(p).map_err(|e| Error::invalid(format!("fusion.{}", e.field()), e.to_string()))
 }
 
@@ -769,6 +770,7 @@ pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
         keep_out_frames: Some(u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX)),
         max_jump_m: Some(p.max_jump_m),
         register_scans: Some(p.register),
+        max_pixel_footprint_m: Some(p.max_footprint_m),
     }
 }
 

@@ -6,7 +6,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use landing_fusion::{Correction, FusionMap, NotRegistered, Scan};
+use landing_fusion::{Correction, FusionMap, NotRegistered, Scan, View};
 use landing_geometry::{Disk, Params};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
@@ -16,7 +16,7 @@ pub use crate::frame::{
     CameraImage, Cloud, Frame, FrameOptions, ImagePixels, Intrinsics, SegmentationMode,
 };
 use crate::geodetic::{Geodetic, enu_to_geodetic};
-use crate::segmentation::{self, PointMask, Segmenter};
+use crate::segmentation::{self, PointMask, PointView, Segmenter};
 
 /// Time spent in each step; `None` for steps that did not run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -286,8 +286,21 @@ pub fn run_fused(
         PointMask::Finest,
     )?;
     let map_start = Instant::now();
+    // How finely the frame's camera saw each place: a cell is landable only once a view fine
+    // enough to show small obstacles saw it.
+    let footprint = c.view.as_ref().map(PointView::footprint_on_level_ground);
+    let footprint_in_world = footprint.as_ref().map(|f| {
+        move |p: &[f64; 3]| {
+            f(&Point3::new(
+                p[0] - origin[0],
+                p[1] - origin[1],
+                p[2] - origin[2],
+            ))
+        }
+    });
     let reset = map.insert(Scan {
         classes: c.classes.as_deref(),
+        view: footprint_in_world.as_ref().map(|f| View(f)),
         keep_out: c.obstacles.take(),
         ..scan
     });
@@ -340,6 +353,8 @@ struct Classified {
     classes: Option<Vec<u8>>,
     /// The class mask's obstacle pixels, when a mask classified the points.
     obstacles: Option<ObstacleRays>,
+    /// The view that classified the points, when a mask did.
+    view: Option<PointView>,
     mode: SegmentationMode,
     timings: StageTimings,
 }
@@ -374,6 +389,7 @@ fn classify(
     }
     let landable = &options.params.landable_classes;
     let mut obstacles = None;
+    let mut view = None;
     let classes: Option<Vec<u8>> = match mode {
         SegmentationMode::Model => {
             let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
@@ -386,6 +402,7 @@ fn classify(
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
+            view = Some(out.view);
             Some(out.classes)
         }
         SegmentationMode::ClassImage => {
@@ -398,6 +415,7 @@ fn classify(
                 segmentation::classify_with_mask(camera, by * camera.pose, mask, &world, landable);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
+            view = Some(out.view);
             Some(out.classes)
         }
         SegmentationMode::PointClasses => frame.cloud.classes.clone(),
@@ -407,6 +425,7 @@ fn classify(
         world,
         classes,
         obstacles,
+        view,
         mode,
         timings,
     })

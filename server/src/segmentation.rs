@@ -9,7 +9,7 @@ use landing_perception::{
     CameraModel, ClassMask, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
     SegmenterConfig, classify_points, decode_class_mask, decode_image,
 };
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Point3};
 
 use crate::Error;
 use crate::config::SegmentationConfig;
@@ -21,8 +21,29 @@ pub struct Classified {
     pub classes: Vec<u8>,
     /// The pixels of every class outside `landable`: obstacles the points may have missed.
     pub obstacles: ObstacleRays,
+    /// The view the classes came from.
+    pub view: PointView,
     pub segmentation: Duration,
     pub classification: Duration,
+}
+
+/// The camera and the size of the mask that gave the points their classes: how coarsely each
+/// point was seen.
+#[derive(Debug, Clone)]
+pub struct PointView {
+    camera: CameraModel,
+    mask_width: u32,
+    mask_height: u32,
+}
+
+impl PointView {
+    /// For a point (in the coordinates of the classified points), the longer side of the patch
+    /// of level ground one class pixel covers there, metres; `None` outside the view
+    /// ([`CameraModel::footprint_on_level_ground`]).
+    pub fn footprint_on_level_ground(&self) -> impl Fn(&Point3<f64>) -> Option<f64> + '_ {
+        self.camera
+            .footprint_on_level_ground(self.mask_width, self.mask_height)
+    }
 }
 
 /// A loaded segmentation model with `sessions` ONNX Runtime sessions used in turn, so that
@@ -241,6 +262,11 @@ fn classify_with_masks(
     Classified {
         classes,
         obstacles,
+        view: PointView {
+            camera: model,
+            mask_width: point_mask.width(),
+            mask_height: point_mask.height(),
+        },
         segmentation: Duration::ZERO,
         classification: t.elapsed(),
     }

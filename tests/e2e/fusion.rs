@@ -145,6 +145,10 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
     assert_eq!(defaults.max_cells, Some(configured.max_cells));
     assert_eq!(defaults.keep_out_frames, Some(configured.keep_out_frames));
     assert_eq!(defaults.register_scans, Some(configured.register_scans));
+    assert_eq!(
+        defaults.max_pixel_footprint_m,
+        Some(configured.max_pixel_footprint_m)
+    );
     server.stop().await;
 }
 
@@ -206,4 +210,42 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
         guarded_disks,
         finest.obstacles.on_plane(plane.0, plane.1, plane.2)
     );
+}
+
+/// A fused map calls a cell landable only once a camera saw it finely enough to show small
+/// obstacles (`max_pixel_footprint_m`): classified by the true labels, a stream answers sites
+/// with the rule off and none under a limit no camera pixel meets, though the map holds the same
+/// points.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cells_seen_only_coarsely_are_not_landable() {
+    let server = TestServer::start().await;
+    let frames: Vec<v1::Frame> = scene(35)
+        .frames
+        .iter()
+        .map(|recorded| {
+            let mut f = recorded.frame.clone();
+            f.class_image.clone_from(&recorded.labels);
+            f
+        })
+        .collect();
+    let mut answers = Vec::new();
+    for limit in [0.0, 0.001] {
+        let fusion = v1::FusionOptions {
+            max_pixel_footprint_m: Some(limit),
+            ..enabled()
+        };
+        let options = mode(SegmentationMode::ClassImage);
+        let items = stream_with(&server, frames.clone(), fusing(options, fusion), None).await;
+        let results: Vec<&v1::FrameResult> = items
+            .iter()
+            .map(|i| i.outcome.result().expect("every frame answered"))
+            .collect();
+        let sites: usize = results.iter().map(|r| r.sites.len()).sum();
+        let points: Vec<u32> = results.iter().map(|r| r.point_count).collect();
+        answers.push((sites, points));
+    }
+    assert!(answers[0].0 > 0, "the rule off: sites");
+    assert_eq!(answers[1].0, 0, "no pixel fine enough: no site");
+    assert_eq!(answers[0].1, answers[1].1, "the same map points");
+    server.stop().await;
 }
