@@ -6,7 +6,7 @@
 use std::hint::black_box;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use landing_fusion::{FusionMap, FusionParams, Scan};
+use landing_fusion::{FusionMap, FusionParams, Scan, View};
 use landing_geometry::triangulation::triangulate;
 use landing_geometry::{Params, TriangulationConfig, detect};
 
@@ -34,7 +34,16 @@ fn scan(seed: u64) -> (Vec<[f64; 3]>, Vec<u8>) {
         .unzip()
 }
 
-fn map_of(scans: u64) -> FusionMap<()> {
+/// A far camera at the sensor, 0.02 rad a pixel, seeing the whole roof but never finely enough
+/// ([`FusionParams::max_footprint_m`]): every insertion then looks at every cell, the most work
+/// the resolution rule can cost.
+fn far_view(p: &[f64; 3]) -> Option<f64> {
+    let d = [p[0] - SENSOR[0], p[1] - SENSOR[1], p[2] - SENSOR[2]];
+    let range2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    (d[2] < 0.0).then(|| range2 * 0.02 / -d[2])
+}
+
+fn map_of(scans: u64, view: Option<View<'_>>) -> FusionMap<()> {
     let mut map = FusionMap::new(FusionParams::default()).unwrap();
     for i in 0..scans {
         let (points, classes) = scan(i);
@@ -43,6 +52,7 @@ fn map_of(scans: u64) -> FusionMap<()> {
             sensor: SENSOR,
             points: &points,
             classes: Some(&classes),
+            view,
             ..Scan::new("drone")
         });
     }
@@ -50,7 +60,7 @@ fn map_of(scans: u64) -> FusionMap<()> {
 }
 
 fn bench(c: &mut Criterion) {
-    let map = map_of(40);
+    let map = map_of(40, None);
     let (next, next_classes) = scan(40);
     let landable = |class| class == ROOFTOP;
     let fused = map.fused([[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]], landable);
@@ -68,13 +78,29 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("insert", |b| {
         b.iter_batched(
-            || map_of(40),
+            || map_of(40, None),
             |mut m| {
                 m.insert(Scan {
                     time_s: 4.0,
                     sensor: SENSOR,
                     points: &next,
                     classes: Some(&next_classes),
+                    ..Scan::new("drone")
+                })
+            },
+            criterion::BatchSize::LargeInput,
+        )
+    });
+    g.bench_function("insert with a camera view that resolves no cell", |b| {
+        b.iter_batched(
+            || map_of(40, Some(View(&far_view))),
+            |mut m| {
+                m.insert(Scan {
+                    time_s: 4.0,
+                    sensor: SENSOR,
+                    points: &next,
+                    classes: Some(&next_classes),
+                    view: Some(View(&far_view)),
                     ..Scan::new("drone")
                 })
             },
