@@ -659,7 +659,9 @@ impl<K> FusionMap<K> {
     }
 
     /// Marks the cells `view` saw finely enough (the whole view, not only where the scan's
-    /// points fell: a scan's points hit few of the cells its camera sees).
+    /// points fell: a scan's points hit few of the cells its camera sees). Occlusion is not
+    /// checked: a cell behind something nearer the camera counts as seen, which can only
+    /// matter for the cells a nearer obstacle hides, whose own class votes still decide.
     fn resolve(&mut self, view: View<'_>, origin: [f64; 3]) {
         let max = self.params.max_footprint_m;
         if max <= 0.0 {
