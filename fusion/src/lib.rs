@@ -9,10 +9,10 @@
 //! - per cell, the classes the frames that saw it gave it: one vote per frame (the majority
 //!   class of that frame's points in the cell), so a dense frame does not outvote a sparse one.
 //!   An obstacle vote outweighs [`FusionParams::obstacle_weight`] landable ones, so obstacle
-//!   evidence is not washed out by one contrary frame; and a cell is landable only once a
-//!   camera saw it finely enough to show small obstacles ([`FusionParams::max_footprint_m`]:
-//!   from 40 m a small air vent is a pixel or two, and a frame's miss there would be every
-//!   frame's);
+//!   evidence is not washed out by one contrary frame; and whether a camera has seen the cell
+//!   finely enough to show small obstacles ([`FusionParams::max_footprint_m`]: from 40 m a
+//!   small air vent is a pixel or two, and a frame's miss there would be every frame's), which
+//!   answers report ([`Fused::unresolved`]) so that landing circles keep clear of the rest;
 //! - the keep-out footprints of recent frames' obstacle pixels (`K`, opaque here: the server
 //!   stores the camera's obstacle rays), spread over the approach.
 //!
@@ -85,10 +85,10 @@ pub struct FusionParams {
     pub obstacle_weight: u32,
     /// Whether [`FusionMap::register`] corrects scans (point-to-plane alignment to the map).
     pub register: bool,
-    /// A cell is landable only once a camera saw it finely enough to show small obstacles: a
-    /// view ([`Scan::view`]) one of whose class pixels covered at most this much of the level
-    /// ground there (the longer side, metres). Until then its landable votes answer as unknown;
-    /// obstacle votes count from every view. 0 turns the rule off.
+    /// A cell is resolved once a camera saw it finely enough to show small obstacles: a view
+    /// ([`Scan::view`]) one of whose class pixels covered at most this much of the level ground
+    /// there (the longer side, metres). Answers flag the landable cells not yet resolved
+    /// ([`Fused::unresolved`]). 0 turns the rule off: every cell counts as resolved.
     pub max_footprint_m: f64,
 }
 
@@ -109,8 +109,7 @@ impl Default for FusionParams {
             register: true,
             // The smallest air vents are 0.4-0.6 m across; the shipped model missed a 0.55 m
             // one at 0.2-0.25 m a pixel. At 0.2 m a 0.4 m vent spans two pixels (EVALUATION.md,
-            // "Resolved cells": 0.25 and 0.3 left unsafe sites, 0.15 halves the IoU of the
-            // approach's second second).
+            // "Resolved cells": 0.25 and 0.3 left unsafe sites).
             max_footprint_m: 0.2,
         }
     }
@@ -288,6 +287,10 @@ pub struct Fused {
     pub points: Vec<[f64; 3]>,
     /// The cell's class when any frame classified it (0 where none did).
     pub classes: Option<Vec<u8>>,
+    /// Per point, whether its cell's class is landable but no view fine enough to show small
+    /// obstacles has seen it ([`FusionParams::max_footprint_m`]): the cell could lie on an
+    /// obstacle the camera could not resolve. All `false` with the rule off.
+    pub unresolved: Vec<bool>,
 }
 
 /// The centre of the bounding box of the finite `points`, or `fallback` when none is: a local
@@ -478,7 +481,7 @@ impl<K> FusionMap<K> {
     /// landed on, and the 2-D triangulation would only make slivers of it. Each cell's class is
     /// an obstacle (any class `is_landable` rejects, other than 0 = unknown) when its votes
     /// times [`FusionParams::obstacle_weight`] reach the landable votes, else the most voted
-    /// landable class once a fine enough view saw the cell ([`FusionParams::max_footprint_m`]),
+    /// landable class (flagged [`Fused::unresolved`] until a fine enough view saw the cell),
     /// else 0.
     pub fn fused(&self, bounds: [[f64; 2]; 2], is_landable: impl Fn(u8) -> bool) -> Fused {
         let Some(origin) = self.origin else {
@@ -498,18 +501,16 @@ impl<K> FusionMap<K> {
         // Everything an answer needs of a cell, read in the table's own (memory) order: sorting
         // references instead would chase each one afterwards. Keys are packed into one integer
         // in (x, y, z) order, one comparison per step of the sort.
-        let mut columns: Vec<(u128, [f64; 3], u8)> = self
+        let mut columns: Vec<(u128, [f64; 3], u8, bool)> = self
             .cells
             .iter()
             .map(|(key, cell)| {
-                let mut class = decide(&cell.votes, &landable, weight);
-                if resolving && !cell.resolved && landable[usize::from(class)] {
-                    class = 0;
-                }
-                (sort_key(key), position(key, cell), class)
+                let class = decide(&cell.votes, &landable, weight);
+                let unresolved = resolving && !cell.resolved && landable[usize::from(class)];
+                (sort_key(key), position(key, cell), class, unresolved)
             })
             .collect();
-        columns.sort_unstable_by_key(|(key, _, _)| *key);
+        columns.sort_unstable_by_key(|column| column.0);
         // Sorted by (x, y, z): the last cell of each column is its top.
         columns.dedup_by(|upper, lower| {
             let same_column = upper.0 >> 32 == lower.0 >> 32;
@@ -518,12 +519,13 @@ impl<K> FusionMap<K> {
             }
             same_column
         });
-        columns.retain(|(_, p, _)| inside(p));
+        columns.retain(|column| inside(&column.1));
         Fused {
-            points: columns.iter().map(|(_, p, _)| *p).collect(),
+            points: columns.iter().map(|column| column.1).collect(),
             classes: self
                 .classified
-                .then(|| columns.iter().map(|(_, _, class)| *class).collect()),
+                .then(|| columns.iter().map(|column| column.2).collect()),
+            unresolved: columns.iter().map(|column| column.3).collect(),
         }
     }
 

@@ -42,15 +42,20 @@ fn scan<'a>(t: f64, points: &'a [[f64; 3]], classes: &'a [u8]) -> Scan<'a, u32> 
     }
 }
 
-/// The fused class at the roof point `i`.
-fn class_at(map: &FusionMap<u32>, p: [f64; 3]) -> u8 {
+/// The fused class of the cell at the roof point `p`, and whether it is flagged unresolved.
+fn cell_at(map: &FusionMap<u32>, p: [f64; 3]) -> (u8, bool) {
     let f = map.fused([[-100.0, -100.0], [100.0, 100.0]], landable);
     let i = f
         .points
         .iter()
         .position(|q| (q[0] - p[0]).abs() < 1e-3 && (q[1] - p[1]).abs() < 1e-3)
         .expect("the point's cell");
-    f.classes.unwrap()[i]
+    (f.classes.unwrap()[i], f.unresolved[i])
+}
+
+/// The fused class at the roof point `p`.
+fn class_at(map: &FusionMap<u32>, p: [f64; 3]) -> u8 {
+    cell_at(map, p).0
 }
 
 #[test]
@@ -185,8 +190,13 @@ fn answers_hold_only_the_cells_inside_the_bounds() {
     assert_eq!(f.points.len(), f.classes.unwrap().len());
 }
 
+/// Whether the fused cell at `p` is flagged unresolved.
+fn unresolved_at(map: &FusionMap<u32>, p: [f64; 3]) -> bool {
+    cell_at(map, p).1
+}
+
 #[test]
-fn a_cell_is_landable_only_once_a_fine_view_saw_it() {
+fn landable_cells_are_unresolved_until_a_fine_view_saw_them() {
     let pts = roof([0.0; 3]);
     let max = FusionParams::default().max_footprint_m;
     let rooftop = vec![ROOFTOP; pts.len()];
@@ -206,21 +216,22 @@ fn a_cell_is_landable_only_once_a_fine_view_saw_it() {
             )
         });
     }
-    assert_eq!(class_at(&m, pts[10]), ROOFTOP, "seen at the limit");
-    assert_eq!(class_at(&m, pts[300]), 0, "only coarse views: unknown");
-    assert_eq!(class_at(&m, pts[19]), 0, "never in view: unknown");
-    // Obstacle votes count from any view.
+    assert!(!unresolved_at(&m, pts[10]), "seen at the limit");
+    assert!(unresolved_at(&m, pts[300]), "only coarse views");
+    assert!(unresolved_at(&m, pts[19]), "never in view");
+    // The votes decide the class as before, and an obstacle is not flagged.
+    assert_eq!(class_at(&m, pts[300]), ROOFTOP);
     assert_eq!(class_at(&m, pts[210]), AC_UNIT);
+    assert!(!unresolved_at(&m, pts[210]));
     // A near view resolves every cell it sees, not only those its scan's points fell in.
     let near = |p: &[f64; 3]| (p[0] < 8.0).then_some(max / 4.0);
-    let few = &pts[..1];
     m.insert(Scan {
         view: Some(View(&near)),
-        ..scan(0.5, few, &rooftop[..1])
+        ..scan(0.5, &pts[..1], &rooftop[..1])
     });
-    assert_eq!(class_at(&m, pts[300]), ROOFTOP);
-    assert_eq!(class_at(&m, pts[19]), 0, "still never in view");
-    // With the rule off, or with classes that came from no camera, the votes decide alone.
+    assert!(!unresolved_at(&m, pts[300]));
+    assert!(unresolved_at(&m, pts[19]), "still never in view");
+    // With the rule off, or with classes that came from no camera, nothing is flagged.
     let off = FusionParams {
         max_footprint_m: 0.0,
         ..FusionParams::default()
@@ -231,8 +242,8 @@ fn a_cell_is_landable_only_once_a_fine_view_saw_it() {
             view,
             ..scan(0.0, &pts, &rooftop)
         });
-        assert_eq!(class_at(&m, pts[300]), ROOFTOP);
-        assert_eq!(class_at(&m, pts[19]), ROOFTOP);
+        let f = m.fused([[-100.0, -100.0], [100.0, 100.0]], landable);
+        assert_eq!(f.unresolved, vec![false; f.points.len()]);
     }
 }
 

@@ -218,6 +218,7 @@ pub fn run_pipeline(
         world: &c.world,
         classes: c.classes.as_deref(),
         keep_out: &keep_out,
+        unresolved: &[],
         origin,
     };
     locate(frame, located, options, c.mode, c.timings, start)
@@ -322,10 +323,19 @@ pub fn run_fused(
         reset: reset.map(|r| r.to_string()),
         keep_out_frames: keep_out.len(),
     };
+    // Safe circles keep clear of what no camera has yet seen finely enough to show a small
+    // obstacle; the polygons still hold it (the votes call it roof).
+    let unresolved: Vec<[f64; 3]> = world
+        .iter()
+        .zip(&fused.unresolved)
+        .filter(|(_, unresolved)| **unresolved)
+        .map(|(p, _)| p.map(f64::from))
+        .collect();
     let located = Located {
         world: &world,
         classes: fused.classes.as_deref(),
         keep_out: &keep_out,
+        unresolved: &unresolved,
         origin,
     };
     let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
@@ -438,8 +448,22 @@ struct Located<'a> {
     world: &'a [[f32; 3]],
     classes: Option<&'a [u8]>,
     keep_out: &'a [&'a ObstacleRays],
+    /// Points (same coordinates) on landable ground no camera has seen finely enough yet
+    /// (`landing_fusion::Fused::unresolved`): safe circles keep [`UNRESOLVED_CLEARANCE_M`] from
+    /// each.
+    unresolved: &'a [[f64; 3]],
     origin: [f64; 3],
 }
+
+/// How far a safe circle keeps from each unresolved map point, metres. The points are a
+/// sample of the unresolved ground, not all of it: early in an approach a 16-beam scan's lines
+/// lie up to ~2.4 m apart on the roof, and a circle clear of the points alone could reach in
+/// between them over an unseen vent. 0.5 m left one unsafe site on seed 4417, 1 m none on three
+/// sets (EVALUATION.md, "Resolved cells").
+const UNRESOLVED_CLEARANCE_M: f64 = 1.0;
+
+/// Unresolved points this close to a region's plane count for its circles, metres.
+const UNRESOLVED_PLANE_BAND_M: f64 = 0.5;
 
 /// The geometry on classified frame-local points, and the world/geodetic results.
 fn locate(
@@ -454,21 +478,25 @@ fn locate(
         world,
         classes,
         keep_out,
+        unresolved,
         origin,
     } = input;
 
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
     // what fell between the LiDAR's scan lines.
-    let detection = if keep_out.is_empty() {
+    let detection = if keep_out.is_empty() && unresolved.is_empty() {
         landing_geometry::detect(world, classes, &options.params)?
     } else {
         // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
         // its view decides.
-        let disks = |point, normal, bounds| {
-            ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
-                .into_iter()
-                .map(|(center, radius)| Disk { center, radius })
-                .collect()
+        let disks = |point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]| {
+            let mut disks: Vec<Disk> =
+                ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
+                    .into_iter()
+                    .map(|(center, radius)| Disk { center, radius })
+                    .collect();
+            disks.extend(unresolved_disks(unresolved, point, normal, bounds));
+            disks
         };
         landing_geometry::detect_keeping_out(world, classes, &options.params, &disks)?
     };
@@ -518,6 +546,31 @@ fn locate(
         timings,
         fusion: None,
     })
+}
+
+/// The disks of [`UNRESOLVED_CLEARANCE_M`] around the `unresolved` points near the plane through
+/// `point` with unit `normal` that reach into `bounds` (`[min x, min y, max x, max y]`).
+fn unresolved_disks(
+    unresolved: &[[f64; 3]],
+    point: [f64; 3],
+    normal: [f64; 3],
+    bounds: [f64; 4],
+) -> impl Iterator<Item = Disk> + '_ {
+    let r = UNRESOLVED_CLEARANCE_M;
+    unresolved
+        .iter()
+        .filter(move |q| {
+            let height: f64 = (0..3).map(|i| (q[i] - point[i]) * normal[i]).sum();
+            height.abs() <= UNRESOLVED_PLANE_BAND_M
+                && q[0] >= bounds[0] - r
+                && q[1] >= bounds[1] - r
+                && q[0] <= bounds[2] + r
+                && q[1] <= bounds[3] + r
+        })
+        .map(move |q| Disk {
+            center: [q[0], q[1]],
+            radius: r,
+        })
 }
 
 /// The cloud's points in the world frame, in double precision.

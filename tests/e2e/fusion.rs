@@ -212,12 +212,12 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
     );
 }
 
-/// A fused map calls a cell landable only once a camera saw it finely enough to show small
+/// A fused stream's safe circles keep clear of what no camera saw finely enough to show small
 /// obstacles (`max_pixel_footprint_m`): classified by the true labels, a stream answers sites
 /// with the rule off and none under a limit no camera pixel meets, though the map holds the same
 /// points.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn cells_seen_only_coarsely_are_not_landable() {
+async fn places_seen_only_coarsely_get_no_landing_circle() {
     let server = TestServer::start().await;
     let frames: Vec<v1::Frame> = scene(35)
         .frames
