@@ -43,8 +43,8 @@ pub struct FusionConfig {
     pub obstacle_weight: u32,
     /// Lay each scan onto the map before fusing it (point-to-plane registration).
     pub register_scans: bool,
-    /// A cell is landable only once a camera pixel of at most this size on the roof classified
-    /// it, metres (0: off).
+    /// Safe circles keep clear of places no camera pixel of at most this size on the roof has
+    /// seen, metres (0: off).
     pub max_pixel_footprint_m: f64,
 }
 
