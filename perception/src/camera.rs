@@ -65,10 +65,10 @@ impl CameraModel {
 
     /// How finely a mask of `mask_width × mask_height` pixels, stretched over this camera's
     /// image, sees a world point: the longer side, metres, of the patch that one mask pixel
-    /// covers on level ground (constant world z) through the point; `None` when the point is
-    /// not in the image. Across the ray the patch is the range times the pixel's angle; along
-    /// the ground it stretches by one over the sine of the ray's elevation, so a grazing view is
-    /// coarse however near.
+    /// covers on level ground (constant world z) through the point; `None` when the camera does
+    /// not see the point ([`CameraModel::sees`]). Across the ray the patch is the range times the
+    /// pixel's angle; along the ground it stretches by one over the sine of the ray's elevation,
+    /// so a grazing view is coarse however near.
     ///
     /// ```
     /// # use landing_perception::CameraModel;
@@ -80,37 +80,37 @@ impl CameraModel {
     ///     pose: Isometry3::from_parts(Translation3::new(0.0, 0.0, 20.0), down),
     ///     fx: 100.0, fy: 100.0, cx: 50.0, cy: 40.0, width: 100, height: 80,
     /// };
-    /// let footprint = camera.footprint_on_level_ground(50, 40);
-    /// assert!((footprint(&Point3::new(0.0, 0.0, 0.0)).unwrap() - 0.4).abs() < 1e-9);
+    /// let footprint = |p| camera.footprint_on_level_ground(&p, 50, 40);
+    /// assert!((footprint(Point3::new(0.0, 0.0, 0.0)).unwrap() - 0.4).abs() < 1e-9);
     /// // 5 m to the side: 1.03 times as far, and stretched by 1.03 along the ground.
-    /// let side = footprint(&Point3::new(5.0, 0.0, 0.0)).unwrap();
+    /// let side = footprint(Point3::new(5.0, 0.0, 0.0)).unwrap();
     /// assert!((side - 0.4 * (1.0 + 0.25 * 0.25)).abs() < 1e-9);
     /// // Outside the image.
-    /// assert_eq!(footprint(&Point3::new(20.0, 0.0, 0.0)), None);
+    /// assert_eq!(footprint(Point3::new(20.0, 0.0, 0.0)), None);
     /// ```
     pub fn footprint_on_level_ground(
         &self,
+        point: &Point3<f64>,
         mask_width: u32,
         mask_height: u32,
-    ) -> impl Fn(&Point3<f64>) -> Option<f64> + '_ {
+    ) -> Option<f64> {
+        if !self.sees(point) {
+            return None;
+        }
         // The angle one mask pixel spans, the larger of its two sides.
         let angle = (f64::from(self.width) / (self.fx * f64::from(mask_width.max(1))))
             .max(f64::from(self.height) / (self.fy * f64::from(mask_height.max(1))));
-        let inverse = self.pose.inverse();
-        move |point| {
-            let p = inverse * point;
-            if p.z.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                return None;
-            }
-            let (u, v) = (self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy);
-            if !(u >= 0.0 && v >= 0.0 && u < f64::from(self.width) && v < f64::from(self.height)) {
-                return None;
-            }
-            // range × angle / sin(elevation), with sin(elevation) = |dz| / range.
-            let d = point - self.pose.translation.vector;
-            let footprint = d.coords.norm_squared() * angle / d.z.abs();
-            footprint.is_finite().then_some(footprint)
-        }
+        // range × angle / sin(elevation), with sin(elevation) = |dz| / range.
+        let d = point - self.pose.translation.vector;
+        let footprint = d.coords.norm_squared() * angle / d.z.abs();
+        footprint.is_finite().then_some(footprint)
+    }
+
+    /// Whether a world point is in front of the camera and inside its image.
+    pub fn sees(&self, point: &Point3<f64>) -> bool {
+        let (w, h) = (f64::from(self.width), f64::from(self.height));
+        self.project(point)
+            .is_some_and(|(u, v)| (0.0..w).contains(&u) && (0.0..h).contains(&v))
     }
 
     /// The pixel coordinates `(u, v)` of a world point, or `None` when it is not in front of the

@@ -177,10 +177,7 @@ impl ObstacleRays {
 
     /// Whether `point` (world frame) is in front of this frame's camera and inside its image.
     pub fn sees(&self, point: &Point3<f64>) -> bool {
-        let (w, h) = (f64::from(self.camera.width), f64::from(self.camera.height));
-        self.camera
-            .project(point)
-            .is_some_and(|(u, v)| (0.0..w).contains(&u) && (0.0..h).contains(&v))
+        self.camera.sees(point)
     }
 
     /// The footprints of several frames' obstacle blocks on one plane (as

@@ -287,21 +287,15 @@ pub fn run_fused(
         PointMask::Finest,
     )?;
     let map_start = Instant::now();
-    // How finely the frame's camera saw each place: a cell is landable only once a view fine
-    // enough to show small obstacles saw it.
-    let footprint = c.view.as_ref().map(PointView::footprint_on_level_ground);
-    let footprint_in_world = footprint.as_ref().map(|f| {
-        move |p: &[f64; 3]| {
-            f(&Point3::new(
-                p[0] - origin[0],
-                p[1] - origin[1],
-                p[2] - origin[2],
-            ))
-        }
+    // How finely the frame's camera saw each place (the map's positions are world ones, the
+    // view's frame-local): safe circles keep clear of what no fine view has seen.
+    let local = to_local(origin);
+    let footprint = c.view.as_ref().map(|view| {
+        move |p: &[f64; 3]| view.footprint_on_level_ground(&(local * Point3::from(*p)))
     });
     let reset = map.insert(Scan {
         classes: c.classes.as_deref(),
-        view: footprint_in_world.as_ref().map(|f| View(f)),
+        view: footprint.as_ref().map(|f| View(f)),
         keep_out: c.obstacles.take(),
         ..scan
     });

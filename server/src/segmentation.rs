@@ -40,9 +40,9 @@ impl PointView {
     /// For a point (in the coordinates of the classified points), the longer side of the patch
     /// of level ground one class pixel covers there, metres; `None` outside the view
     /// ([`CameraModel::footprint_on_level_ground`]).
-    pub fn footprint_on_level_ground(&self) -> impl Fn(&Point3<f64>) -> Option<f64> + '_ {
+    pub fn footprint_on_level_ground(&self, point: &Point3<f64>) -> Option<f64> {
         self.camera
-            .footprint_on_level_ground(self.mask_width, self.mask_height)
+            .footprint_on_level_ground(point, self.mask_width, self.mask_height)
     }
 }
 
