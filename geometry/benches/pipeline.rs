@@ -137,7 +137,9 @@ fn benches(c: &mut Criterion) {
         let polygons = region_polygons(&tri, &pts, &regions, &BoundaryParams::default()).unwrap();
         let ranking = RankingParams::from(&params);
         g.bench_function(BenchmarkId::new("step_polylabel_rank", label), |b| {
-            b.iter(|| rank_sites(black_box(&regions), polygons.clone(), &ranking, None).unwrap())
+            b.iter(|| {
+                rank_sites(black_box(&regions), polygons.clone(), None, &ranking, None).unwrap()
+            })
         });
         g.finish();
     }

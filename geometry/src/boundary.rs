@@ -64,6 +64,36 @@ struct Scratch {
     used: Vec<bool>,
 }
 
+/// For each region of `regions` (same order), the rings that bound the part of it made of the
+/// triangles `keep` accepts, or `None` when it accepts them all (the region's polygon bounds that
+/// part). The part may fall apart, so there can be several counter-clockwise rings, each with
+/// its clockwise holes; an empty list means no triangle is left. Rings are traced as
+/// [`region_polygons`] traces them.
+pub fn region_parts(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    regions: &Regions,
+    keep: impl Fn(u32) -> bool,
+) -> Result<Vec<Option<Vec<Vec<[f64; 2]>>>>, GeometryError> {
+    let mut scratch = Scratch {
+        head: vec![EMPTY; points.len()],
+        ..Scratch::default()
+    };
+    regions
+        .regions
+        .iter()
+        .enumerate()
+        .map(|(r, region)| {
+            if region.triangles.iter().all(|&t| keep(t)) {
+                return Ok(None);
+            }
+            let inside = |t: usize| regions.labels[t] == r as u32 && keep(t as u32);
+            let kept = region.triangles.iter().copied().filter(|&t| keep(t));
+            boundary_rings(tri, points, kept, inside, &mut scratch).map(Some)
+        })
+        .collect()
+}
+
 fn region_polygon(
     tri: &Triangulation,
     points: &[[f64; 3]],
@@ -72,33 +102,8 @@ fn region_polygon(
     triangles: &[u32],
     s: &mut Scratch,
 ) -> Result<Polygon, GeometryError> {
-    s.edges.clear();
-    for &t in triangles {
-        for e in 3 * t as usize..3 * t as usize + 3 {
-            let o = tri.halfedges[e];
-            if o == EMPTY || labels[o as usize / 3] != label {
-                s.edges.push(e as u32);
-            }
-        }
-    }
-    s.edges.sort_unstable();
-    let m = s.edges.len();
-    s.chain.clear();
-    s.chain.resize(m, EMPTY);
-    s.used.clear();
-    s.used.resize(m, false);
-    // Build the per-point lists in reverse so each list is in ascending edge order.
-    for i in (0..m).rev() {
-        let v = tri.triangles[s.edges[i] as usize] as usize;
-        s.chain[i] = s.head[v];
-        s.head[v] = i as u32;
-    }
-    let result = trace_rings(tri, points, s);
-    for &e in &s.edges {
-        s.head[tri.triangles[e as usize] as usize] = EMPTY;
-    }
-    let rings = result?;
-
+    let inside = |t: usize| labels[t] == label;
+    let rings = boundary_rings(tri, points, triangles.iter().copied(), inside, s)?;
     let mut shell = None;
     let mut holes = Vec::new();
     for ring in rings {
@@ -125,6 +130,43 @@ fn region_polygon(
             .unwrap_or(a.len().cmp(&b.len()))
     });
     Ok(Polygon { shell, holes })
+}
+
+/// The rings bounding `triangles`, whose neighbours count as the same set where `inside` says
+/// so: their boundary half-edges walked head to tail.
+fn boundary_rings(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    triangles: impl Iterator<Item = u32>,
+    inside: impl Fn(usize) -> bool,
+    s: &mut Scratch,
+) -> Result<Vec<Vec<[f64; 2]>>, GeometryError> {
+    s.edges.clear();
+    for t in triangles {
+        for e in 3 * t as usize..3 * t as usize + 3 {
+            let o = tri.halfedges[e];
+            if o == EMPTY || !inside(o as usize / 3) {
+                s.edges.push(e as u32);
+            }
+        }
+    }
+    s.edges.sort_unstable();
+    let m = s.edges.len();
+    s.chain.clear();
+    s.chain.resize(m, EMPTY);
+    s.used.clear();
+    s.used.resize(m, false);
+    // Build the per-point lists in reverse so each list is in ascending edge order.
+    for i in (0..m).rev() {
+        let v = tri.triangles[s.edges[i] as usize] as usize;
+        s.chain[i] = s.head[v];
+        s.head[v] = i as u32;
+    }
+    let result = trace_rings(tri, points, s);
+    for &e in &s.edges {
+        s.head[tri.triangles[e as usize] as usize] = EMPTY;
+    }
+    result
 }
 
 /// Follows the boundary edges in `s.edges` into rings of coordinates, each rotated to start at its

@@ -48,7 +48,7 @@ use std::time::{Duration, Instant};
 
 pub use class::SemanticClass;
 pub use polylabel::Disk;
-pub use ranking::KeepOut;
+pub use ranking::{KeepClear, KeepOut};
 pub use triangulation::{Triangulation, TriangulationConfig, Triangulator};
 
 /// Largest accepted absolute coordinate, metres. Beyond it f32 input has less than a metre of
@@ -304,6 +304,9 @@ pub enum GeometryError {
     /// `classes` does not have one entry per point.
     #[error("{classes} classes given for {points} points")]
     ClassCountMismatch { points: usize, classes: usize },
+    /// [`KeepClear::points`] does not have one flag per point.
+    #[error("{flags} keep-clear flags given for {points} points")]
+    FlagCountMismatch { points: usize, flags: usize },
     /// A bounded loop reached its bound: a bug or pathological input, reported instead of spinning.
     #[error("{step} gave up after {limit} iterations")]
     IterationLimit { step: &'static str, limit: usize },
@@ -336,23 +339,24 @@ pub fn detect_with(
     params: &Params,
     triangulation: &TriangulationConfig,
 ) -> Result<Detection, GeometryError> {
-    run(points, classes, params, triangulation, None)
+    run(points, classes, params, triangulation, KeepClear::default())
 }
 
-/// [`detect`] whose safe circles also stay clear of obstacles that the points missed
-/// (`keep_out`: the camera's obstacle pixels, say).
+/// [`detect`] whose safe circles also stay clear of what `keep_clear` names: obstacles that the
+/// points missed (the camera's obstacle pixels, say), and ground flagged per point. A flag list
+/// of the wrong length gives [`GeometryError::FlagCountMismatch`].
 pub fn detect_keeping_out(
     points: &[[f32; 3]],
     classes: Option<&[u8]>,
     params: &Params,
-    keep_out: &dyn KeepOut,
+    keep_clear: KeepClear<'_>,
 ) -> Result<Detection, GeometryError> {
     run(
         points,
         classes,
         params,
         &TriangulationConfig::default(),
-        Some(keep_out),
+        keep_clear,
     )
 }
 
@@ -361,10 +365,18 @@ fn run(
     classes: Option<&[u8]>,
     params: &Params,
     triangulation: &TriangulationConfig,
-    keep_out: Option<&dyn KeepOut>,
+    keep_clear: KeepClear<'_>,
 ) -> Result<Detection, GeometryError> {
     params.validate()?;
     check_points(points, classes)?;
+    if let Some(flags) = keep_clear.points
+        && flags.len() != points.len()
+    {
+        return Err(GeometryError::FlagCountMismatch {
+            points: points.len(),
+            flags: flags.len(),
+        });
+    }
     let pts: Vec<[f64; 3]> = points
         .iter()
         .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
@@ -392,14 +404,25 @@ fn run(
     timings.plane_extraction = t3 - t2;
 
     let polygons = boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams {})?;
+    // Where points are flagged, the circles stay in the part of each region without them.
+    let parts = match keep_clear.points {
+        Some(flags) if flags.iter().any(|&f| f) => {
+            Some(boundary::region_parts(&tri, &pts, &regions, |t| {
+                let t = 3 * t as usize;
+                !tri.triangles[t..t + 3].iter().any(|&v| flags[v as usize])
+            })?)
+        }
+        _ => None,
+    };
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
     let sites = ranking::rank_sites(
         &regions,
         polygons,
+        parts.as_deref(),
         &ranking::RankingParams::from(params),
-        keep_out,
+        keep_clear.disks,
     )?;
     timings.polylabel = t4.elapsed();
 

@@ -68,6 +68,17 @@ pub fn polylabel_avoiding(
     keep_out: &[Disk],
     params: &PolylabelParams,
 ) -> Result<Pole, GeometryError> {
+    polylabel_in_rings(&rings(polygon), keep_out, params)
+}
+
+/// [`polylabel_avoiding`] for the area that `rings` bound by the even-odd rule: one polygon's
+/// shell and holes, or several polygons' (a region with parts cut out, say). The first ring's
+/// first vertex stands in when the rings are empty or degenerate.
+pub fn polylabel_in_rings(
+    rings: &[&[[f64; 2]]],
+    keep_out: &[Disk],
+    params: &PolylabelParams,
+) -> Result<Pole, GeometryError> {
     if !(params.precision_m > 0.0 && params.precision_m.is_finite()) {
         return Err(GeometryError::InvalidParameter {
             field: "polylabel_precision_m",
@@ -75,18 +86,18 @@ pub fn polylabel_avoiding(
             reason: "must be finite and > 0",
         });
     }
-    let Some(&first) = polygon.shell.first() else {
+    let Some(&first) = rings.first().and_then(|r| r.first()) else {
         return Ok(Pole {
             center: [0.0, 0.0],
             distance: 0.0,
         });
     };
     let field = Field {
-        edges: Edges::new(polygon),
+        edges: Edges::new(rings),
         disks: DiskGrid::new(keep_out),
     };
     let (mut min, mut max) = (first, first);
-    for p in &polygon.shell {
+    for p in rings.iter().copied().flatten() {
         min = [min[0].min(p[0]), min[1].min(p[1])];
         max = [max[0].max(p[0]), max[1].max(p[1])];
     }
@@ -116,7 +127,7 @@ pub fn polylabel_avoiding(
         x += cell;
     }
     // Start from the better of the area centroid and the box centre.
-    let mut best = Cell::new(centroid(&polygon.shell).unwrap_or(first), 0.0, &field);
+    let mut best = Cell::new(centroid(rings[0]).unwrap_or(first), 0.0, &field);
     let mid = Cell::new([min[0] + w / 2.0, min[1] + h / 2.0], 0.0, &field);
     if mid.d > best.d {
         best = mid;
@@ -150,7 +161,15 @@ pub fn polylabel_avoiding(
 /// Signed distance from `p` to the boundary of `polygon`: positive inside (inside the shell and
 /// outside every hole), negative outside.
 pub fn signed_distance(polygon: &Polygon, p: [f64; 2]) -> f64 {
-    Edges::new(polygon).signed_distance(p)
+    Edges::new(&rings(polygon)).signed_distance(p)
+}
+
+/// A polygon's shell and holes.
+pub(crate) fn rings(polygon: &Polygon) -> Vec<&[[f64; 2]]> {
+    std::iter::once(&polygon.shell)
+        .chain(&polygon.holes)
+        .map(Vec::as_slice)
+        .collect()
 }
 
 /// What the circle must stay clear of: the polygon's boundary and the keep-out disks.
@@ -293,10 +312,10 @@ struct Edges {
 const CHUNK: usize = 16;
 
 impl Edges {
-    fn new(polygon: &Polygon) -> Self {
+    fn new(rings: &[&[[f64; 2]]]) -> Self {
         let mut segs = Vec::new();
         let mut chunks = Vec::new();
-        for ring in std::iter::once(&polygon.shell).chain(&polygon.holes) {
+        for ring in rings {
             let n = ring.len();
             let mut start = segs.len();
             for i in 0..n {

@@ -6,7 +6,7 @@
 //! the polygon) and stops once `max_sites` sites beat every remaining bound: the result is the same
 //! as running it on every region.
 
-use crate::polylabel::{Disk, PolylabelParams, polylabel_avoiding};
+use crate::polylabel::{self, Disk, PolylabelParams, polylabel_in_rings};
 use crate::regions::Regions;
 use crate::validation::ring_signed_area;
 use crate::{GeometryError, LandingSite, Params, Polygon};
@@ -60,20 +60,36 @@ impl<F: Fn([f64; 3], [f64; 3], [f64; 4]) -> Vec<Disk>> KeepOut for F {
     }
 }
 
+/// What a safe circle keeps clear of besides its polygon's boundary. `Default` is nothing.
+#[derive(Clone, Copy, Default)]
+pub struct KeepClear<'a> {
+    /// Obstacles the points missed, as disks per plane.
+    pub disks: Option<&'a dyn KeepOut>,
+    /// One flag per point: a safe circle keeps off every triangle with a flagged vertex (ground
+    /// not yet known well enough to land on, for example what no camera has seen finely). The
+    /// polygons still hold those triangles.
+    pub points: Option<&'a [bool]>,
+}
+
 /// Turns the polygons of `regions` (one each, same order) into ranked landing sites, each safe
-/// circle also clear of what `keep_out` gives for its plane; a polygon that the keep-out disks
-/// cover entirely gives no site.
+/// circle also clear of what `keep_out` gives for its plane and, where `parts` has rings for the
+/// region (see [`crate::boundary::region_parts`]), inside them; a polygon that the keep-out disks
+/// cover entirely, or whose part is empty, gives no site.
 pub fn rank_sites(
     regions: &Regions,
     polygons: Vec<Polygon>,
+    parts: Option<&[Option<Vec<Vec<[f64; 2]>>>]>,
     params: &RankingParams,
     keep_out: Option<&dyn KeepOut>,
 ) -> Result<Vec<LandingSite>, GeometryError> {
-    if polygons.len() != regions.regions.len() {
+    if polygons.len() != regions.regions.len()
+        || parts.is_some_and(|p| p.len() != regions.regions.len())
+    {
         return Err(GeometryError::InvalidMesh {
             reason: format!(
-                "{} polygons for {} regions",
+                "{} polygons and {} parts for {} regions",
                 polygons.len(),
+                parts.map_or(polygons.len(), <[_]>::len),
                 regions.regions.len()
             ),
         });
@@ -112,7 +128,23 @@ pub fn rank_sites(
         let disks = keep_out.map_or_else(Vec::new, |k| {
             k.disks_on_plane(region.mean, region.normal, polygon.bounds())
         });
-        let pole = polylabel_avoiding(&polygon, &disks, &params.polylabel)?;
+        let small_hole = |ring: &Vec<[f64; 2]>| {
+            let area = ring_signed_area(ring);
+            area < 0.0 && -area < params.min_hole_area_m2
+        };
+        let rings: Vec<&[[f64; 2]]> = match parts.and_then(|p| p[r].as_ref()) {
+            // The part's holes were not filtered above.
+            Some(part) => part
+                .iter()
+                .filter(|ring| !small_hole(ring))
+                .map(Vec::as_slice)
+                .collect(),
+            None => polylabel::rings(&polygon),
+        };
+        if rings.is_empty() {
+            continue;
+        }
+        let pole = polylabel_in_rings(&rings, &disks, &params.polylabel)?;
         if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0) {
             continue;
         }

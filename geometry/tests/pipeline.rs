@@ -4,7 +4,7 @@
 use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof, fuzz_detect_input};
 use landing_geometry::validation::{Location, check_detection, locate_in_ring};
 use landing_geometry::{
-    Detection, Disk, GeometryError, Params, Polygon, SemanticClass, TriangulationConfig,
+    Detection, Disk, GeometryError, KeepClear, Params, Polygon, SemanticClass, TriangulationConfig,
     Triangulator, detect, detect_keeping_out, detect_with,
 };
 
@@ -508,8 +508,12 @@ fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
         planes.borrow_mut().push((point, normal));
         vec![vent]
     };
+    let keep_clear = KeepClear {
+        disks: Some(&keep_out),
+        points: None,
+    };
     let d =
-        detect_keeping_out(&pts, Some(&classes), &Params::default(), &keep_out).expect("detect");
+        detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear).expect("detect");
     check_detection(&d).expect("valid detection");
     let (point, normal) = planes.borrow()[0];
     assert!(
@@ -526,6 +530,72 @@ fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
     assert!(
         s.polygon.signed_distance([s.center[0], s.center[1]]) >= s.safe_radius_m - 1e-9,
         "and stays inside the polygon"
+    );
+}
+
+#[test]
+fn safe_circles_keep_off_the_triangles_of_flagged_points() {
+    // A flat roof of about 20 x 20 m on a unit triangular lattice: each point's triangles cover
+    // the disk of the triangles' height around it.
+    let (cols, rows) = (21, 24);
+    let star = 3f64.sqrt() / 2.0;
+    let (pts, classes) = lattice(cols, rows, &[]);
+    let plain = run(&pts, Some(&classes), &Params::default());
+    let with = |flagged: &dyn Fn(usize, usize) -> bool| {
+        let flags: Vec<bool> = (0..rows)
+            .flat_map(|j| (0..cols).map(move |i| (i, j)))
+            .map(|(i, j)| flagged(i, j))
+            .collect();
+        let keep_clear = KeepClear {
+            disks: None,
+            points: Some(&flags),
+        };
+        let d = detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear)
+            .expect("detect");
+        check_detection(&d).expect("valid detection");
+        for s in &d.sites {
+            assert_eq!(
+                s.polygon, plain.sites[0].polygon,
+                "the polygon keeps every triangle"
+            );
+            for (k, _) in flags.iter().enumerate().filter(|(_, f)| **f) {
+                let v = lattice_xy(k % cols, k / cols);
+                let dist = (s.center[0] - v[0]).hypot(s.center[1] - v[1]);
+                assert!(
+                    dist >= s.safe_radius_m + star - 1e-6,
+                    "the circle {s:?} reaches the triangles of {v:?}"
+                );
+            }
+        }
+        d
+    };
+    let full = plain.sites[0].safe_radius_m;
+    // One flagged point at the centre, where the plain circle sits.
+    let one = with(&|i, j| (i, j) == (10, 12));
+    assert!(one.sites[0].safe_radius_m < full);
+    // The left 8 columns flagged: the circle fits in the other 12 m.
+    let left = with(&|i, _| i < 8);
+    let r = left.sites[0].safe_radius_m;
+    assert!(r < full && r > 4.5, "{r} against {full}");
+    // A band across the middle cuts the roof in two parts; the circle is in one of them.
+    let band = with(&|_, j| (10..=13).contains(&j));
+    let r = band.sites[0].safe_radius_m;
+    assert!(r > 3.0 && r < left.sites[0].safe_radius_m, "{r}");
+    // Everything flagged: no site; nothing flagged: as without flags.
+    assert!(with(&|_, _| true).sites.is_empty());
+    assert_eq!(with(&|_, _| false).sites, plain.sites);
+    // One flag per point, or an error that says so.
+    let short = vec![false; pts.len() - 1];
+    let keep_clear = KeepClear {
+        disks: None,
+        points: Some(&short),
+    };
+    assert_eq!(
+        detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear).unwrap_err(),
+        GeometryError::FlagCountMismatch {
+            points: pts.len(),
+            flags: pts.len() - 1
+        }
     );
 }
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use landing_fusion::{Correction, FusionMap, NotRegistered, Scan, View};
-use landing_geometry::{Disk, Params};
+use landing_geometry::{Disk, KeepClear, Params};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
@@ -317,19 +317,11 @@ pub fn run_fused(
         reset: reset.map(|r| r.to_string()),
         keep_out_frames: keep_out.len(),
     };
-    // Safe circles keep clear of what no camera has yet seen finely enough to show a small
-    // obstacle; the polygons still hold it (the votes call it roof).
-    let unresolved: Vec<[f64; 3]> = world
-        .iter()
-        .zip(&fused.unresolved)
-        .filter(|(_, unresolved)| **unresolved)
-        .map(|(p, _)| p.map(f64::from))
-        .collect();
     let located = Located {
         world: &world,
         classes: fused.classes.as_deref(),
         keep_out: &keep_out,
-        unresolved: &unresolved,
+        unresolved: &fused.unresolved,
         origin,
     };
     let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
@@ -442,22 +434,15 @@ struct Located<'a> {
     world: &'a [[f32; 3]],
     classes: Option<&'a [u8]>,
     keep_out: &'a [&'a ObstacleRays],
-    /// Points (same coordinates) on landable ground no camera has seen finely enough yet
-    /// (`landing_fusion::Fused::unresolved`): safe circles keep [`UNRESOLVED_CLEARANCE_M`] from
-    /// each.
-    unresolved: &'a [[f64; 3]],
+    /// Per point (empty for none): on landable ground no camera has seen finely enough yet
+    /// (`landing_fusion::Fused::unresolved`). Safe circles keep off every triangle with such a
+    /// vertex: the points are a sample of the unresolved ground, and early in an approach a
+    /// 16-beam scan's lines lie up to ~2.4 m apart on the roof, so the ground between them is as
+    /// unresolved as they are. The polygons still hold those triangles (the votes call them
+    /// roof).
+    unresolved: &'a [bool],
     origin: [f64; 3],
 }
-
-/// How far a safe circle keeps from each unresolved map point, metres. The points are a
-/// sample of the unresolved ground, not all of it: early in an approach a 16-beam scan's lines
-/// lie up to ~2.4 m apart on the roof, and a circle clear of the points alone could reach in
-/// between them over an unseen vent. 0.5 m left one unsafe site on seed 4417, 1 m none on three
-/// sets (EVALUATION.md, "Resolved cells").
-const UNRESOLVED_CLEARANCE_M: f64 = 1.0;
-
-/// Unresolved points this close to a region's plane count for its circles, metres.
-const UNRESOLVED_PLANE_BAND_M: f64 = 0.5;
 
 /// The geometry on classified frame-local points, and the world/geodetic results.
 fn locate(
@@ -484,15 +469,16 @@ fn locate(
         // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
         // its view decides.
         let disks = |point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]| {
-            let mut disks: Vec<Disk> =
-                ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
-                    .into_iter()
-                    .map(|(center, radius)| Disk { center, radius })
-                    .collect();
-            disks.extend(unresolved_disks(unresolved, point, normal, bounds));
-            disks
+            ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
+                .into_iter()
+                .map(|(center, radius)| Disk { center, radius })
+                .collect()
         };
-        landing_geometry::detect_keeping_out(world, classes, &options.params, &disks)?
+        let keep_clear = KeepClear {
+            disks: Some(&disks),
+            points: (!unresolved.is_empty()).then_some(unresolved),
+        };
+        landing_geometry::detect_keeping_out(world, classes, &options.params, keep_clear)?
     };
     let t = detection.timings;
     timings.triangulation = Some(t.triangulation);
@@ -540,31 +526,6 @@ fn locate(
         timings,
         fusion: None,
     })
-}
-
-/// The disks of [`UNRESOLVED_CLEARANCE_M`] around the `unresolved` points near the plane through
-/// `point` with unit `normal` that reach into `bounds` (`[min x, min y, max x, max y]`).
-fn unresolved_disks(
-    unresolved: &[[f64; 3]],
-    point: [f64; 3],
-    normal: [f64; 3],
-    bounds: [f64; 4],
-) -> impl Iterator<Item = Disk> + '_ {
-    let r = UNRESOLVED_CLEARANCE_M;
-    unresolved
-        .iter()
-        .filter(move |q| {
-            let height: f64 = (0..3).map(|i| (q[i] - point[i]) * normal[i]).sum();
-            height.abs() <= UNRESOLVED_PLANE_BAND_M
-                && q[0] >= bounds[0] - r
-                && q[1] >= bounds[1] - r
-                && q[0] <= bounds[2] + r
-                && q[1] <= bounds[3] + r
-        })
-        .map(move |q| Disk {
-            center: [q[0], q[1]],
-            radius: r,
-        })
 }
 
 /// The cloud's points in the world frame, in double precision.
