@@ -64,6 +64,9 @@ struct Scratch {
     used: Vec<bool>,
 }
 
+/// Closed rings of x/y points (not repeating the first at the end).
+pub type Rings = Vec<Vec<[f64; 2]>>;
+
 /// For each region of `regions` (same order), the rings that bound the part of it made of the
 /// triangles `keep` accepts, or `None` when it accepts them all (the region's polygon bounds that
 /// part). The part may fall apart, so there can be several counter-clockwise rings, each with
@@ -74,7 +77,7 @@ pub fn region_parts(
     points: &[[f64; 3]],
     regions: &Regions,
     keep: impl Fn(u32) -> bool,
-) -> Result<Vec<Option<Vec<Vec<[f64; 2]>>>>, GeometryError> {
+) -> Result<Vec<Option<Rings>>, GeometryError> {
     let mut scratch = Scratch {
         head: vec![EMPTY; points.len()],
         ..Scratch::default()
@@ -140,7 +143,7 @@ fn boundary_rings(
     triangles: impl Iterator<Item = u32>,
     inside: impl Fn(usize) -> bool,
     s: &mut Scratch,
-) -> Result<Vec<Vec<[f64; 2]>>, GeometryError> {
+) -> Result<Rings, GeometryError> {
     s.edges.clear();
     for t in triangles {
         for e in 3 * t as usize..3 * t as usize + 3 {

@@ -6,6 +6,7 @@
 //! the polygon) and stops once `max_sites` sites beat every remaining bound: the result is the same
 //! as running it on every region.
 
+use crate::boundary::Rings;
 use crate::polylabel::{self, Disk, PolylabelParams, polylabel_in_rings};
 use crate::regions::Regions;
 use crate::validation::ring_signed_area;
@@ -78,7 +79,7 @@ pub struct KeepClear<'a> {
 pub fn rank_sites(
     regions: &Regions,
     polygons: Vec<Polygon>,
-    parts: Option<&[Option<Vec<Vec<[f64; 2]>>>]>,
+    parts: Option<&[Option<Rings>]>,
     params: &RankingParams,
     keep_out: Option<&dyn KeepOut>,
 ) -> Result<Vec<LandingSite>, GeometryError> {

@@ -599,6 +599,108 @@ fn safe_circles_keep_off_the_triangles_of_flagged_points() {
     );
 }
 
+/// Distance from `p` to the triangle `t` (0 inside).
+fn triangle_distance(p: [f64; 2], t: [[f64; 2]; 3]) -> f64 {
+    let orient =
+        |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+    let signs = [orient(t[0], t[1]), orient(t[1], t[2]), orient(t[2], t[0])];
+    if signs.iter().all(|&s| s >= 0.0) || signs.iter().all(|&s| s <= 0.0) {
+        return 0.0;
+    }
+    (0..3)
+        .map(|i| {
+            let (a, b) = (t[i], t[(i + 1) % 3]);
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len2 = dx * dx + dy * dy;
+            let u = if len2 > 0.0 {
+                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a[0] + u * dx - p[0]).hypot(a[1] + u * dy - p[1])
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// On random roofs, with scattered flags, flagged patches and flagged bands: every safe circle
+/// stays off every triangle with a flagged vertex, and every site's polygon is one the same
+/// roof gives without flags.
+#[test]
+fn property_flagged_points_keep_circles_off_their_triangles() {
+    let mut g = Pcg32::new(77);
+    let (mut sites, mut cut) = (0, 0);
+    for case in 0..24u64 {
+        let params = SceneParams {
+            point_count: 800 + (g.next_u32() % 2500) as usize,
+            roof_size_m: [g.range(10.0, 30.0), g.range(10.0, 30.0)],
+            obstacles: (g.next_u32() % 5) as usize,
+            second_roof: (case % 3 == 1).then_some(SecondRoof {
+                size_m: [g.range(6.0, 15.0), g.range(6.0, 15.0)],
+                height_m: g.range(3.0, 40.0),
+                gap_m: g.range(0.0, 4.0),
+            }),
+            ..SceneParams::default()
+        };
+        let (s, plain) = scene(&params, case);
+        let xy = |i: usize| [f64::from(s.points[i][0]), f64::from(s.points[i][1])];
+        let (cx, cy, r) = (
+            g.range(-10.0, 10.0),
+            g.range(-10.0, 10.0),
+            g.range(1.0, 6.0),
+        );
+        let rate = g.range(0.0, 0.05);
+        let flags: Vec<bool> = (0..s.points.len())
+            .map(|i| match case % 3 {
+                0 => g.unit() < rate,
+                1 => (xy(i)[0] - cx).hypot(xy(i)[1] - cy) < r,
+                _ => (xy(i)[1] - cy).abs() < r / 4.0,
+            })
+            .collect();
+        let keep_clear = KeepClear {
+            disks: None,
+            points: Some(&flags),
+        };
+        let d = detect_keeping_out(&s.points, Some(&s.classes), &Params::default(), keep_clear)
+            .expect("detect");
+        check_detection(&d).expect("valid detection");
+        let pts: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
+        let tri =
+            landing_geometry::triangulation::triangulate(&pts, &TriangulationConfig::default())
+                .expect("triangulate");
+        let flagged: Vec<[[f64; 2]; 3]> = tri
+            .triangles
+            .chunks_exact(3)
+            .filter(|t| t.iter().any(|&v| flags[v as usize]))
+            .map(|t| [xy(t[0] as usize), xy(t[1] as usize), xy(t[2] as usize)])
+            .collect();
+        for site in &d.sites {
+            assert!(
+                plain.sites.iter().any(|p| p.polygon == site.polygon),
+                "case {case}: a polygon the roof does not give without flags"
+            );
+            let c = [site.center[0], site.center[1]];
+            for t in &flagged {
+                assert!(
+                    triangle_distance(c, *t) >= site.safe_radius_m - 1e-9,
+                    "case {case}: the circle {site:?} reaches the flagged triangle {t:?}"
+                );
+            }
+        }
+        sites += d.sites.len();
+        cut += usize::from(
+            d.sites.len() < plain.sites.len()
+                || d.sites
+                    .iter()
+                    .zip(&plain.sites)
+                    .any(|(a, b)| a.safe_radius_m < b.safe_radius_m),
+        );
+    }
+    assert!(
+        sites > 10 && cut > 10,
+        "{sites} sites, {cut} cases where flags cut a circle"
+    );
+}
+
 /// Found by the `detect` fuzz target (RELIABILITY.md): a real hole of about 1e-31 m² whose
 /// vertices mix x of 1e-41 and 1e-23 m. Its shoelace area rounds to 0, and the validity check
 /// used to call it a zero-area ring; the check is exact now.
