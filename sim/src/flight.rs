@@ -175,7 +175,11 @@ impl Default for FlightConfig {
     }
 }
 
-/// Camera poses of an approach to `building`, one per frame.
+/// Camera poses of an approach to `building`, one per frame. The heading is drawn at random;
+/// where the path at that heading would enter another building or lose sight of the roof
+/// behind one (a drone flies around a tower, not through it), the next of [`HEADING_TRIES`]
+/// headings a golden angle apart is taken. The random draws are the same either way, so every
+/// approach whose drawn heading is clear is as it was.
 pub fn approach<R: Rng + ?Sized>(
     world: &World,
     building: usize,
@@ -185,14 +189,14 @@ pub fn approach<R: Rng + ?Sized>(
     let b = &world.buildings[building];
     let c = b.center();
     let s = b.size();
-    let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+    let drawn = rng.random_range(0.0..std::f64::consts::TAU);
     let aim = [
         c[0] + rng.random_range(-0.2..0.2) * s[0],
         c[1] + rng.random_range(-0.2..0.2) * s[1],
     ];
     let n = config.frames.max(1);
-    (0..n)
-        .map(|i| {
+    let frames = |yaw: f64| {
+        (0..n).map(move |i| {
             let f = if n > 1 {
                 f64::from(i) / f64::from(n - 1)
             } else {
@@ -200,27 +204,104 @@ pub fn approach<R: Rng + ?Sized>(
             };
             let altitude = config.altitude_m.0 + (config.altitude_m.1 - config.altitude_m.0) * f;
             let pitch_deg = config.pitch_deg.0 + (config.pitch_deg.1 - config.pitch_deg.0) * f;
-            let pitch = pitch_deg.to_radians();
-            let back = altitude / pitch.tan().max(1e-9);
+            let back = altitude / pitch_deg.to_radians().tan().max(1e-9);
             let position = [
                 aim[0] - back * yaw.cos(),
                 aim[1] - back * yaw.sin(),
                 b.height_m + altitude,
             ];
-            View {
-                building,
-                camera: camera_pose(position, yaw, pitch),
-                altitude_m: altitude,
-                pitch_deg,
-                yaw_deg: yaw.to_degrees(),
-            }
+            (position, altitude, pitch_deg)
+        })
+    };
+    let target = [aim[0], aim[1], b.height_m];
+    let clear = |yaw: f64| {
+        frames(yaw).all(|(position, ..)| {
+            world.buildings.iter().enumerate().all(|(j, other)| {
+                j == building
+                    || !(other.contains_within(position, FLIGHT_CLEARANCE_M)
+                        || other.blocks(position, target))
+            })
+        })
+    };
+    let yaw = (0..HEADING_TRIES)
+        .map(|k| (drawn + f64::from(k) * GOLDEN_ANGLE).rem_euclid(std::f64::consts::TAU))
+        .find(|&yaw| clear(yaw))
+        .unwrap_or(drawn);
+    frames(yaw)
+        .map(|(position, altitude, pitch_deg)| View {
+            building,
+            camera: camera_pose(position, yaw, pitch_deg.to_radians()),
+            altitude_m: altitude,
+            pitch_deg,
+            yaw_deg: yaw.to_degrees(),
         })
         .collect()
 }
 
+/// Headings [`approach`] tries before it keeps the drawn one.
+pub const HEADING_TRIES: u32 = 64;
+
+/// π (3 − √5): consecutive headings this far apart spread evenly around the roof.
+const GOLDEN_ANGLE: f64 = 2.399_963_229_728_653;
+
+/// How far an approach keeps from other buildings' walls and roofs, metres.
+const FLIGHT_CLEARANCE_M: f64 = 2.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A 20 m roof walled in by 80 m towers on three sides: every approach comes in over the
+    /// open side, whatever heading was drawn; walled in on all four, it keeps the drawn one.
+    #[test]
+    fn approaches_fly_around_other_buildings() {
+        use crate::world::{Building, WorldConfig};
+        use rand::SeedableRng;
+        let block = |min: [f64; 2], max: [f64; 2], height_m: f64| Building {
+            min,
+            max,
+            height_m,
+            parapet_height_m: 0.0,
+            parapet_thickness_m: 0.0,
+            assets: Vec::new(),
+        };
+        let mut world = World::generate(1, &WorldConfig::default()).unwrap();
+        world.buildings = vec![
+            block([0.0, 0.0], [20.0, 20.0], 10.0),
+            block([-80.0, -80.0], [-5.0, 100.0], 80.0),
+            block([-80.0, -80.0], [100.0, -5.0], 80.0),
+            block([25.0, -80.0], [100.0, 100.0], 80.0),
+        ];
+        let config = FlightConfig {
+            frames: 41,
+            ..FlightConfig::default()
+        };
+        for seed in 0..20 {
+            let mut rng = rand::rngs::SmallRng::seed_from_u64(seed);
+            let views = approach(&world, 0, &config, &mut rng);
+            assert_eq!(views.len(), 41);
+            let start = views[0].camera.translation.vector;
+            assert!(
+                start.y > 20.0,
+                "seed {seed}: the approach starts at {start:?}"
+            );
+            for v in &views {
+                let p = v.camera.translation.vector;
+                assert!(
+                    v.yaw_deg.to_radians().sin() < 0.0,
+                    "seed {seed}: not flying south"
+                );
+                for other in &world.buildings[1..] {
+                    assert!(!other.contains_within([p.x, p.y, p.z], FLIGHT_CLEARANCE_M));
+                }
+            }
+        }
+        world
+            .buildings
+            .push(block([-80.0, 25.0], [100.0, 100.0], 80.0));
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(0);
+        assert_eq!(approach(&world, 0, &config, &mut rng).len(), 41);
+    }
 
     #[test]
     fn nadir_camera_looks_down_with_x_right_of_heading() {

@@ -113,6 +113,39 @@ pub struct Building {
 }
 
 impl Building {
+    /// Whether `point` lies within `margin` of the building's solid box (walls, roof and
+    /// parapet).
+    pub fn contains_within(&self, point: [f64; 3], margin: f64) -> bool {
+        let top = self.height_m + self.parapet_height_m;
+        (0..2).all(|i| point[i] >= self.min[i] - margin && point[i] <= self.max[i] + margin)
+            && point[2] <= top + margin
+    }
+
+    /// Whether the segment from `a` to `b` passes through the building's solid box (a slab
+    /// test; touching a face does not count).
+    pub fn blocks(&self, a: [f64; 3], b: [f64; 3]) -> bool {
+        let lo = [self.min[0], self.min[1], 0.0];
+        let hi = [
+            self.max[0],
+            self.max[1],
+            self.height_m + self.parapet_height_m,
+        ];
+        let (mut t0, mut t1) = (0.0f64, 1.0f64);
+        for i in 0..3 {
+            let d = b[i] - a[i];
+            if d.abs() < 1e-12 {
+                if a[i] <= lo[i] || a[i] >= hi[i] {
+                    return false;
+                }
+                continue;
+            }
+            let (u, v) = ((lo[i] - a[i]) / d, (hi[i] - a[i]) / d);
+            t0 = t0.max(u.min(v));
+            t1 = t1.min(u.max(v));
+        }
+        t0 < t1
+    }
+
     /// The roof outline (counter-clockwise, not closed).
     pub fn outline(&self) -> Vec<[f64; 2]> {
         rect(self.min, self.max)
