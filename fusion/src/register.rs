@@ -11,6 +11,8 @@
 //! scene does not constrain (a bare flat roof says nothing about heading) where the pose put
 //! them.
 
+use std::collections::HashMap;
+
 use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, UnitQuaternion, Vector3, Vector6};
 
 use crate::FusionMap;
@@ -159,9 +161,15 @@ impl<K> FusionMap<K> {
         let mut rms_before = None;
         let mut matched = 0;
         let mut rms_after = 0.0;
+        // The plane of each cell's neighbourhood, once per call: a later round's point mostly
+        // falls in the cell it fell in before (the correction is centimetres).
+        let mut planes = HashMap::new();
         for _ in 0..ROUNDS {
             let moved: Vec<Vector3<f64>> = sample.iter().map(|p| apply(&x, p, &pivot)).collect();
-            let matches: Vec<Match> = moved.iter().filter_map(|p| self.plane_near(p)).collect();
+            let matches: Vec<Match> = moved
+                .iter()
+                .filter_map(|p| self.plane_near(p, &mut planes))
+                .collect();
             matched = matches.len();
             if matched < MIN_MATCHES {
                 return Err(NotRegistered::TooFewMatches { matched });
@@ -194,14 +202,31 @@ impl<K> FusionMap<K> {
         })
     }
 
-    /// The plane the map's cells around `p` (map-origin metres) form, when they form one.
-    fn plane_near(&self, p: &Vector3<f64>) -> Option<Match> {
+    /// The plane the map's cells around `p` (map-origin metres) form, when they form one, and
+    /// `p` is near it. `planes` remembers each cell's neighbourhood plane (centroid, normal).
+    fn plane_near(
+        &self,
+        p: &Vector3<f64>,
+        planes: &mut HashMap<[i32; 3], Option<(Vector3<f64>, Vector3<f64>)>>,
+    ) -> Option<Match> {
         let c = self.params.cell_m;
         let key = [p.x, p.y, p.z].map(|v| (v / c).floor());
         if !key.iter().all(|k| k.abs() < 1.0e9) {
             return None;
         }
         let key = key.map(|k| k as i32);
+        let (centroid, normal) = (*planes.entry(key).or_insert_with(|| self.plane_at(key)))?;
+        (normal.dot(&(p - centroid)).abs() <= MAX_RESIDUAL_M).then_some(Match {
+            point: *p,
+            centroid,
+            normal,
+        })
+    }
+
+    /// The plane (centroid, unit normal) the cells around the cell `key` form, when they form
+    /// one.
+    fn plane_at(&self, key: [i32; 3]) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        let c = self.params.cell_m;
         let mut means = [Vector3::zeros(); 27];
         let mut n = 0;
         for dx in -1..=1 {
@@ -243,11 +268,7 @@ impl<K> FusionMap<K> {
         {
             return None;
         }
-        (normal.dot(&(p - centroid)).abs() <= MAX_RESIDUAL_M).then_some(Match {
-            point: *p,
-            centroid,
-            normal,
-        })
+        Some((centroid, normal))
     }
 }
 
