@@ -120,6 +120,10 @@ impl std::fmt::Display for NotRegistered {
     }
 }
 
+/// Each cell's neighbourhood plane (centroid, unit normal) when it forms one, as far as one
+/// [`FusionMap::register`] call has looked.
+type Planes = HashMap<[i32; 3], Option<(Vector3<f64>, Vector3<f64>)>>;
+
 /// One scan point matched to a local plane of the map (map-origin coordinates, metres).
 struct Match {
     point: Vector3<f64>,
@@ -204,11 +208,7 @@ impl<K> FusionMap<K> {
 
     /// The plane the map's cells around `p` (map-origin metres) form, when they form one, and
     /// `p` is near it. `planes` remembers each cell's neighbourhood plane (centroid, normal).
-    fn plane_near(
-        &self,
-        p: &Vector3<f64>,
-        planes: &mut HashMap<[i32; 3], Option<(Vector3<f64>, Vector3<f64>)>>,
-    ) -> Option<Match> {
+    fn plane_near(&self, p: &Vector3<f64>, planes: &mut Planes) -> Option<Match> {
         let c = self.params.cell_m;
         let key = [p.x, p.y, p.z].map(|v| (v / c).floor());
         if !key.iter().all(|k| k.abs() < 1.0e9) {
