@@ -398,6 +398,9 @@ struct Cell {
     /// Whether a view fine enough to show small obstacles saw the cell
     /// ([`FusionParams::max_footprint_m`]).
     resolved: bool,
+    /// The finest pixel footprint of the views whose votes the cell holds, metres (infinite
+    /// before the first view).
+    finest: f32,
 }
 
 impl Cell {
@@ -411,6 +414,11 @@ impl Cell {
 /// Cells whose mean weighs at most this many points, so that the mean keeps following new
 /// scans (a drone's pose error changes slowly over an approach).
 const MAX_MEAN_WEIGHT: u16 = 64;
+
+/// A view whose pixel footprint on a cell is at most this fraction of the finest that voted on
+/// it before replaces those votes (as a much nearer camera replaces a farther one's keep-out
+/// footprints).
+const FINER_VIEW: f32 = 0.8;
 
 /// Expired cells are looked for every this many frames (and whenever the map is full).
 const EXPIRY_EVERY_FRAMES: u32 = 10;
@@ -603,8 +611,9 @@ impl<K> FusionMap<K> {
         self.classified |= classes.is_some();
         // Classes that came from no camera are as fine as their source.
         let resolved = classes.is_some() && scan.view.is_none();
-        // (cell, offset in the cell in cell units, class) of every usable point, grouped by cell.
-        let mut keyed: Vec<([i32; 3], [f32; 3], u8)> = Vec::with_capacity(scan.points.len());
+        // (cell, offset in the cell in cell units, class, index) of every usable point, grouped
+        // by cell.
+        let mut keyed: Vec<([i32; 3], [f32; 3], u8, u32)> = Vec::with_capacity(scan.points.len());
         for (i, p) in scan.points.iter().enumerate() {
             let rel = [
                 (p[0] - origin[0]) / c,
@@ -618,13 +627,13 @@ impl<K> FusionMap<K> {
             let key = rel.map(|v| v.floor() as i32);
             let offset = std::array::from_fn(|k| (rel[k] - f64::from(key[k])) as f32);
             let class = classes.map_or(0, |k| k[i]);
-            keyed.push((key, offset, class));
+            keyed.push((key, offset, class, i as u32));
         }
         keyed.sort_unstable_by_key(|k| k.0);
         for group in keyed.chunk_by(|a, b| a.0 == b.0) {
             let key = group[0].0;
             let mut counts = [0u32; CLASSES];
-            for &(_, _, class) in group {
+            for &(_, _, class, _) in group {
                 counts[usize::from(class).min(CLASSES - 1)] += 1;
             }
             let cell = self.cells.entry(key).or_insert(Cell {
@@ -633,10 +642,11 @@ impl<K> FusionMap<K> {
                 votes: [0; CLASSES],
                 seen_s,
                 resolved,
+                finest: f32::INFINITY,
             });
             cell.seen_s = seen_s;
             cell.resolved |= resolved;
-            for &(_, offset, _) in group {
+            for &(_, offset, _, _) in group {
                 let n = f32::from(cell.points.min(MAX_MEAN_WEIGHT - 1));
                 for (mean, o) in cell.mean.iter_mut().zip(offset) {
                     *mean = (*mean * n + o) / (n + 1.0);
@@ -644,6 +654,20 @@ impl<K> FusionMap<K> {
                 cell.points = cell.points.saturating_add(1);
             }
             if classes.is_some() {
+                // A much finer view than every earlier one that voted here replaces their votes:
+                // a far frame's pixel is smeared over the cell's surroundings (an edge, a
+                // parapet, a camera blocked while its LiDAR sees), and votes of views about as
+                // fine add up.
+                let footprint = scan
+                    .view
+                    .and_then(|view| (view.0)(&scan.points[group[0].3 as usize]))
+                    .map(|f| f as f32);
+                if let Some(f) = footprint {
+                    if f <= FINER_VIEW * cell.finest {
+                        cell.votes = [0; CLASSES];
+                    }
+                    cell.finest = cell.finest.min(f);
+                }
                 // The frame's majority class; ties go to the obstacle-most (highest) id.
                 let (class, _) = counts
                     .iter()

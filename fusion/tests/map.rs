@@ -248,6 +248,47 @@ fn landable_cells_are_unresolved_until_a_fine_view_saw_them() {
 }
 
 #[test]
+fn a_much_finer_view_replaces_the_votes_of_coarser_ones() {
+    let pts = roof([0.0; 3]);
+    let rooftop = vec![ROOFTOP; pts.len()];
+    let mut ac = rooftop.clone();
+    ac[100] = AC_UNIT;
+    let wall = vec![3u8; pts.len()];
+    let (far, similar) = (|_: &[f64; 3]| Some(0.5), |_: &[f64; 3]| Some(0.45));
+    let (near, nearer) = (|_: &[f64; 3]| Some(0.35), |_: &[f64; 3]| Some(0.3));
+    let insert = |m: &mut FusionMap<u32>, t: f64, view: View<'_>, classes: &[u8]| {
+        m.insert(Scan {
+            view: Some(view),
+            ..scan(t, &pts, classes)
+        });
+    };
+    // A far frame calls the whole roof wall; three frames from about as far call it roof: the
+    // wall vote outweighs them, and would outweigh one more.
+    let mut m = map();
+    insert(&mut m, 0.0, View(&far), &wall);
+    for k in 1..4 {
+        insert(&mut m, f64::from(k) * 0.1, View(&similar), &rooftop);
+    }
+    assert_eq!(class_at(&m, pts[150]), 3);
+    // One frame from much nearer (0.35 m pixels against 0.45 m) replaces every earlier vote.
+    insert(&mut m, 0.5, View(&near), &ac);
+    assert_eq!(class_at(&m, pts[150]), ROOFTOP);
+    assert_eq!(class_at(&m, pts[100]), AC_UNIT);
+    // Its obstacle vote then outweighs views about as fine as it...
+    for k in 6..10 {
+        insert(&mut m, f64::from(k) * 0.1, View(&nearer), &rooftop);
+    }
+    assert_eq!(class_at(&m, pts[100]), AC_UNIT);
+    // ...and votes without a camera view add up as before.
+    let mut m = map();
+    m.insert(scan(0.0, &pts, &ac));
+    for k in 1..5 {
+        m.insert(scan(f64::from(k) * 0.1, &pts, &rooftop));
+    }
+    assert_eq!(class_at(&m, pts[100]), AC_UNIT);
+}
+
+#[test]
 fn cells_are_bounded_in_number_and_time() {
     let params = FusionParams {
         max_cells: 1_000,
