@@ -9,7 +9,9 @@
 //! - per cell, the classes the frames that saw it gave it: one vote per frame (the majority
 //!   class of that frame's points in the cell), so a dense frame does not outvote a sparse one.
 //!   An obstacle vote outweighs [`FusionParams::obstacle_weight`] landable ones, so obstacle
-//!   evidence is not washed out by one contrary frame; and whether a camera has seen the cell
+//!   evidence is not washed out by one contrary frame, and a view whose pixels there are much
+//!   finer than every earlier voter's replaces their votes (a far pixel smears an edge's class
+//!   over the roof beside it); and whether a camera has seen the cell
 //!   finely enough to show small obstacles ([`FusionParams::max_footprint_m`]: from 40 m a
 //!   small air vent is a pixel or two, and a frame's miss there would be every frame's), which
 //!   answers report ([`Fused::unresolved`]) so that landing circles keep clear of the rest;
