@@ -31,10 +31,7 @@ pub fn region_polygons(
     regions: &Regions,
     _params: &BoundaryParams,
 ) -> Result<Vec<Polygon>, GeometryError> {
-    let mut scratch = Scratch {
-        head: vec![EMPTY; points.len()],
-        ..Scratch::default()
-    };
+    let mut scratch = Scratch::for_points(points.len());
     regions
         .regions
         .iter()
@@ -78,10 +75,7 @@ pub fn region_parts(
     regions: &Regions,
     keep: impl Fn(u32) -> bool,
 ) -> Result<Vec<Option<Rings>>, GeometryError> {
-    let mut scratch = Scratch {
-        head: vec![EMPTY; points.len()],
-        ..Scratch::default()
-    };
+    let mut scratch = Scratch::for_points(points.len());
     regions
         .regions
         .iter()
@@ -95,6 +89,15 @@ pub fn region_parts(
             boundary_rings(tri, points, kept, inside, &mut scratch).map(Some)
         })
         .collect()
+}
+
+impl Scratch {
+    fn for_points(n: usize) -> Self {
+        Self {
+            head: vec![EMPTY; n],
+            ..Self::default()
+        }
+    }
 }
 
 fn region_polygon(
