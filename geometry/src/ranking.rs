@@ -6,7 +6,7 @@
 //! the polygon) and stops once `max_sites` sites beat every remaining bound: the result is the same
 //! as running it on every region.
 
-use crate::boundary::Rings;
+use crate::boundary::{Rings, ring_is_ccw};
 use crate::polylabel::{self, Disk, PolylabelParams, polylabel_in_rings};
 use crate::regions::Regions;
 use crate::validation::ring_signed_area;
@@ -95,13 +95,13 @@ pub fn rank_sites(
             ),
         });
     }
+    // Holes smaller than the parameter are left out.
+    let small = |ring: &Vec<[f64; 2]>| ring_signed_area(ring).abs() < params.min_hole_area_m2;
     // (upper bound of the radius, region index, polygon, area) of every region that can qualify.
     let mut candidates: Vec<(f64, usize, Polygon, f64)> = Vec::new();
     for (r, mut polygon) in polygons.into_iter().enumerate() {
         if params.min_hole_area_m2 > 0.0 {
-            polygon
-                .holes
-                .retain(|h| ring_signed_area(h).abs() >= params.min_hole_area_m2);
+            polygon.holes.retain(|h| !small(h));
         }
         let area = polygon.area();
         if area < params.min_area_m2 {
@@ -129,15 +129,11 @@ pub fn rank_sites(
         let disks = keep_out.map_or_else(Vec::new, |k| {
             k.disks_on_plane(region.mean, region.normal, polygon.bounds())
         });
-        let small_hole = |ring: &Vec<[f64; 2]>| {
-            let area = ring_signed_area(ring);
-            area < 0.0 && -area < params.min_hole_area_m2
-        };
         let rings: Vec<&[[f64; 2]]> = match parts.and_then(|p| p[r].as_ref()) {
-            // The part's holes were not filtered above.
+            // The part's holes (its clockwise rings) were not filtered above.
             Some(part) => part
                 .iter()
-                .filter(|ring| !small_hole(ring))
+                .filter(|ring| ring_is_ccw(ring) || !small(ring))
                 .map(Vec::as_slice)
                 .collect(),
             None => polylabel::rings(&polygon),

@@ -601,25 +601,11 @@ fn safe_circles_keep_off_the_triangles_of_flagged_points() {
 
 /// Distance from `p` to the triangle `t` (0 inside).
 fn triangle_distance(p: [f64; 2], t: [[f64; 2]; 3]) -> f64 {
-    let orient =
-        |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
-    let signs = [orient(t[0], t[1]), orient(t[1], t[2]), orient(t[2], t[0])];
-    if signs.iter().all(|&s| s >= 0.0) || signs.iter().all(|&s| s <= 0.0) {
-        return 0.0;
-    }
-    (0..3)
-        .map(|i| {
-            let (a, b) = (t[i], t[(i + 1) % 3]);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len2 = dx * dx + dy * dy;
-            let u = if len2 > 0.0 {
-                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            (a[0] + u * dx - p[0]).hypot(a[1] + u * dy - p[1])
-        })
-        .fold(f64::INFINITY, f64::min)
+    let triangle = Polygon {
+        shell: t.to_vec(),
+        holes: Vec::new(),
+    };
+    (-triangle.signed_distance(p)).max(0.0)
 }
 
 /// On random roofs, with scattered flags, flagged patches and flagged bands: every safe circle
