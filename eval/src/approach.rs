@@ -6,7 +6,7 @@
 
 use serde::Serialize;
 
-use crate::geom::{P2, Polygon2, convex_hull};
+use crate::geom::{Grid, Mask, P2, Polygon2, convex_hull};
 use crate::metrics::RoofTruth;
 
 /// Where a frame stands in its approach.
@@ -157,11 +157,15 @@ pub fn breakdown<'a, T>(
 /// A roof's first scan stays exactly the frame's own region, so that the first answer of an
 /// approach is judged as the single-frame one is.
 ///
+/// The line-of-sight scores of a later answer leave out what no frame so far had in sight
+/// ([`RoofTruth::in_sight`], on a grid of `cell_m`): each frame sees its scanned region less its
+/// shadows, and an answer draws on every frame's. (The scanned region alone is a convex hull,
+/// which spans the shadow behind a tall obstacle that no scan line reached.)
+///
 /// A roof is the same across frames when its building id, height and outline are. The regions
 /// only grow, even where the server's map forgets old cells (its horizon): the answer is judged
-/// against what the approach has scanned, not what the server kept. The hidden parts (the
-/// line-of-sight scores) stay the current frame's shadows.
-pub fn fused_roofs(frames: &[&[RoofTruth]]) -> Vec<Vec<RoofTruth>> {
+/// against what the approach has scanned, not what the server kept.
+pub fn fused_roofs(frames: &[&[RoofTruth]], cell_m: f64) -> Vec<Vec<RoofTruth>> {
     let mut seen: Vec<SeenRoof> = Vec::new();
     let mut out = Vec::with_capacity(frames.len());
     for roofs in frames {
@@ -178,6 +182,7 @@ pub fn fused_roofs(frames: &[&[RoofTruth]]) -> Vec<Vec<RoofTruth>> {
                         whole: false,
                         hull: Vec::new(),
                         seen_obstacles: Vec::new(),
+                        in_sight: None,
                     });
                     seen.len() - 1
                 }
@@ -185,6 +190,7 @@ pub fn fused_roofs(frames: &[&[RoofTruth]]) -> Vec<Vec<RoofTruth>> {
             let s = &mut seen[k];
             let first = s.scans == 0;
             s.scans += 1;
+            s.add_sight(roof, cell_m);
             match &roof.scanned {
                 None => s.whole = true,
                 Some(region) => s.hull = grow_scanned(&s.hull, region),
@@ -199,6 +205,9 @@ pub fn fused_roofs(frames: &[&[RoofTruth]]) -> Vec<Vec<RoofTruth>> {
                 } else {
                     Polygon2::default()
                 });
+            }
+            if !first {
+                roof.in_sight.clone_from(&s.in_sight);
             }
             for o in &mut roof.obstacles {
                 if o.seen {
@@ -232,9 +241,36 @@ struct SeenRoof {
     whole: bool,
     hull: Vec<P2>,
     seen_obstacles: Vec<Polygon2>,
+    /// What the frames so far had in sight, on a grid over the outline.
+    in_sight: Option<Mask>,
 }
 
 impl SeenRoof {
+    /// Adds what one frame had in sight of the roof: its scanned region (the walkable roof when
+    /// it saw all of it) less its shadows.
+    fn add_sight(&mut self, roof: &RoofTruth, cell_m: f64) {
+        if self.in_sight.is_none() {
+            self.in_sight = roof
+                .outline
+                .bounds()
+                .and_then(|(lo, hi)| Grid::covering(lo, hi, cell_m, cell_m))
+                .map(Mask::empty);
+        }
+        let Some(sight) = &mut self.in_sight else {
+            return;
+        };
+        let mut seen = Mask::of_polygon(sight.grid, &roof.interior);
+        if let Some(region) = &roof.scanned {
+            seen.and(&Mask::of_polygon(sight.grid, region));
+        }
+        let mut shadows = Mask::empty(sight.grid);
+        for h in &roof.hidden {
+            shadows.add_polygon(h);
+        }
+        seen.and_not(&shadows);
+        sight.or(&seen);
+    }
+
     fn is(&self, roof: &RoofTruth) -> bool {
         self.id == roof.id
             && (self.height_m - roof.height_m).abs() < 1e-6
@@ -260,6 +296,7 @@ mod tests {
             }],
             scanned,
             hidden: vec![],
+            in_sight: None,
             stated_best_radius_m: None,
             scored: true,
             target: true,
@@ -290,7 +327,7 @@ mod tests {
             .map(|(k, s)| vec![roof(Some(s.clone()), k == 1)])
             .collect();
         let refs: Vec<&[RoofTruth]> = frames.iter().map(Vec::as_slice).collect();
-        let fused = fused_roofs(&refs);
+        let fused = fused_roofs(&refs, 0.05);
         assert_eq!(fused.len(), 3);
         let regions: Vec<Polygon2> = fused
             .iter()
@@ -326,6 +363,52 @@ mod tests {
     }
 
     #[test]
+    fn line_of_sight_is_what_any_frame_so_far_saw() {
+        use crate::geom::Grid;
+        use crate::metrics::hidden_mask;
+        // Frame 0 scans the left half with a shadow over x 2..4, frame 1 the right half with a
+        // shadow over x 12..14, frame 2 the whole roof with shadows over x 2..4, 6..8 and 16..18.
+        let frame = |scanned: Option<Polygon2>, shadows: &[[f64; 2]]| {
+            let mut r = roof(scanned, false);
+            r.hidden = shadows
+                .iter()
+                .map(|&[a, b]| Polygon2::rect([a, 0.0], [b, 10.0]))
+                .collect();
+            r
+        };
+        let frames = [
+            vec![frame(
+                Some(Polygon2::rect([0.0, 0.0], [10.0, 10.0])),
+                &[[2.0, 4.0]],
+            )],
+            vec![frame(
+                Some(Polygon2::rect([10.0, 0.0], [20.0, 10.0])),
+                &[[12.0, 14.0]],
+            )],
+            vec![frame(None, &[[2.0, 4.0], [6.0, 8.0], [16.0, 18.0]])],
+        ];
+        let refs: Vec<&[RoofTruth]> = frames.iter().map(Vec::as_slice).collect();
+        let fused = fused_roofs(&refs, 0.05);
+        let grid = Grid::covering([0.0, 0.0], [20.0, 10.0], 0.05, 0.0).unwrap();
+        let hidden = |k: usize| {
+            let m = hidden_mask(grid, &fused[k][0]);
+            move |x: f64| (0..grid.ny).all(|j| m.get((x / 0.05) as usize, j))
+        };
+        // The first answer is judged as a single frame is: by its own shadows.
+        assert_eq!(fused[0][0].in_sight, None);
+        assert!(hidden(0)(3.0) && !hidden(0)(7.0) && !hidden(0)(13.0));
+        // After frame 1, each half is in sight but for its own frame's shadow.
+        let h = hidden(1);
+        assert!(h(3.0) && h(13.0));
+        assert!(!h(1.0) && !h(7.0) && !h(11.0) && !h(19.0));
+        // Frame 2 sees x 12..14 anew; its shadows over 6..8 and 16..18 were in sight of frames
+        // 0 and 1. Only 2..4, in every frame's shadow, stays hidden.
+        let h = hidden(2);
+        assert!(h(3.0));
+        assert!(!h(7.0) && !h(13.0) && !h(17.0) && !h(9.0));
+    }
+
+    #[test]
     fn roofs_are_told_apart_and_a_whole_roof_stays_whole() {
         let mut other = roof(Some(Polygon2::rect([0.0, 0.0], [1.0, 1.0])), false);
         other.id = 4;
@@ -341,7 +424,7 @@ mod tests {
             ],
         ];
         let refs: Vec<&[RoofTruth]> = frames.iter().map(Vec::as_slice).collect();
-        let fused = fused_roofs(&refs);
+        let fused = fused_roofs(&refs, 0.05);
         // Roof 4's region is its own, not roof 3's.
         assert!((fused[2][1].scanned.as_ref().unwrap().area() - 1.0).abs() < 1e-9);
         assert_eq!(fused[1][0].scanned, None);

@@ -270,6 +270,24 @@ impl Mask {
         }
     }
 
+    /// The cells whose centre `f` accepts.
+    pub fn from_fn(grid: Grid, mut f: impl FnMut(P2) -> bool) -> Self {
+        let cells = (0..grid.ny)
+            .flat_map(|j| (0..grid.nx).map(move |i| (i, j)))
+            .map(|(i, j)| f(grid.center(i, j)))
+            .collect();
+        Self { grid, cells }
+    }
+
+    /// Whether the cell holding point `p` is set (`false` outside the grid).
+    pub fn contains(&self, p: P2) -> bool {
+        let g = self.grid;
+        let (fi, fj) = ((p[0] - g.x0) / g.cell_m, (p[1] - g.y0) / g.cell_m);
+        // `fi < nx` is false for NaN, so a point that is not finite is outside.
+        let inside = fi >= 0.0 && fj >= 0.0 && fi < g.nx as f64 && fj < g.ny as f64;
+        inside && self.get(fi as usize, fj as usize)
+    }
+
     /// The cells of `polygon` (inside the shell, outside every hole).
     pub fn of_polygon(grid: Grid, polygon: &Polygon2) -> Self {
         let mut m = Self::empty(grid);

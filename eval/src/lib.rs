@@ -37,6 +37,7 @@
 //!     obstacles: vec![Obstacle { class: 8, footprint: Polygon2::rect([4.0, 4.0], [6.0, 6.0]), seen: true }],
 //!     scanned: None,
 //!     hidden: vec![],
+//!     in_sight: None,
 //!     stated_best_radius_m: None,
 //!     scored: true,
 //!     target: true,

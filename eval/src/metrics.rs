@@ -68,6 +68,11 @@ pub struct RoofTruth {
     /// under a light at the sensor). No method can know what is there from this frame; the
     /// line-of-sight scores leave them out.
     pub hidden: Vec<Polygon2>,
+    /// For a fused answer, the part of the roof that some frame so far had in sight: the union
+    /// of each frame's scanned region less that frame's shadows ([`crate::approach::fused_roofs`]).
+    /// When set, the line-of-sight scores leave out the rest instead of the current frame's
+    /// `hidden` parts: what an earlier frame saw, the map holds. `None` for a single frame.
+    pub in_sight: Option<Mask>,
     /// The best landing radius the recording's ground truth states, when it has one (kept to
     /// cross-check the raster optimum).
     pub stated_best_radius_m: Option<f64>,
@@ -163,8 +168,8 @@ pub struct RoofEval {
     pub radius_ratio: f64,
     /// IoU of the returned polygons with the true landable area (0 when nothing was returned).
     pub iou: f64,
-    /// The true landable area in the sensor's line of sight (less [`RoofTruth::hidden`]),
-    /// square metres.
+    /// The true landable area in the sensor's line of sight (less [`hidden_mask`]: the frame's
+    /// shadows, or for a fused answer what no frame so far had in sight), square metres.
     pub visible_area_m2: f64,
     /// Radius of the largest circle in that area.
     pub visible_radius_m: f64,
@@ -265,8 +270,12 @@ pub fn landable_mask(grid: Grid, roof: &RoofTruth) -> Mask {
     m
 }
 
-/// The part of a roof hidden from the sensor ([`RoofTruth::hidden`]) on `grid`.
+/// The part of a roof hidden from the sensor on `grid`: outside [`RoofTruth::in_sight`] when
+/// it is set, else inside the [`RoofTruth::hidden`] shadows.
 pub fn hidden_mask(grid: Grid, roof: &RoofTruth) -> Mask {
+    if let Some(seen) = &roof.in_sight {
+        return Mask::from_fn(grid, |p| !seen.contains(p));
+    }
     let mut m = Mask::empty(grid);
     for h in &roof.hidden {
         m.add_polygon(h);
@@ -378,6 +387,7 @@ mod tests {
             }],
             scanned: None,
             hidden: vec![],
+            in_sight: None,
             stated_best_radius_m: None,
             scored: true,
             target: true,

@@ -141,6 +141,7 @@ mod tests {
             }],
             scanned: None,
             hidden: vec![],
+            in_sight: None,
             stated_best_radius_m: None,
             scored: true,
             target: true,

@@ -321,6 +321,7 @@ pub async fn run_streams(
                 .iter()
                 .map(|s| s.roofs.as_slice())
                 .collect::<Vec<_>>(),
+            params.cell_m,
         );
         for &mode in &config.modes {
             let (r, f) =
@@ -543,6 +544,7 @@ mod tests {
             obstacles: vec![],
             scanned: None,
             hidden: vec![],
+            in_sight: None,
             stated_best_radius_m: None,
             scored: true,
             target: true,

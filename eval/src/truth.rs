@@ -156,6 +156,7 @@ pub fn scenario_of(
                     obstacles: vec![],
                     scanned: None,
                     hidden: vec![],
+                    in_sight: None,
                     stated_best_radius_m: None,
                     scored: false,
                     target: false,
@@ -171,6 +172,7 @@ pub fn scenario_of(
             // The simulator's scanned region: interior ∩ convex hull of the scan on this roof.
             scanned: (landable.shell.len() >= 3).then_some(landable),
             hidden,
+            in_sight: None,
             stated_best_radius_m: Some(r.best_safe_radius_m),
             scored: true,
             // The ground truth lists the approached roof first.

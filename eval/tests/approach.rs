@@ -52,6 +52,7 @@ fn the_fused_truth_grows_with_the_scans_of_the_approach() {
             .iter()
             .map(|s| s.roofs.as_slice())
             .collect::<Vec<_>>(),
+        MetricsParams::default().cell_m,
     );
     let params = MetricsParams::default();
     let target_area = |roofs: &[eval::metrics::RoofTruth]| {
@@ -75,6 +76,16 @@ fn the_fused_truth_grows_with_the_scans_of_the_approach() {
             assert!(
                 b >= a - 0.05,
                 "frame {k}: fused truth {b} m² < single {a} m²"
+            );
+        }
+        // So can its line of sight: what the frame saw, every earlier frame's sight added.
+        let sight = |e: &eval::metrics::FrameEval| {
+            e.roofs.iter().find(|r| r.target).map(|r| r.visible_area_m2)
+        };
+        if let (Some(a), Some(b)) = (sight(&single), sight(&union)) {
+            assert!(
+                b >= a - 0.05,
+                "frame {k}: fused line of sight {b} m² < single {a} m²"
             );
         }
     }
