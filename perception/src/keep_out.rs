@@ -78,11 +78,21 @@ impl ObstacleRays {
     /// one disk covering all of it: conservative, and a quarter of the rays to cast per plane.
     /// `points` (world frame) give the obstacles' heights: each point that projects onto an
     /// obstacle pixel counts for the blocks around it.
+    ///
+    /// `is_structure` names the obstacle classes of structures too large for a scan to miss
+    /// (a building's wall, a parapet's face). A block whose obstacle pixels are all structure,
+    /// with a point that the mask also calls structure among the points around it, casts
+    /// nothing: the scan hit that structure, and its points, which are not landable, already
+    /// end the landing region at it. Its sweep would only keep free roof clear: a pixel cannot
+    /// tell a wall's foot from its top, so a far parapet's face is swept its height times the
+    /// cotangent of the view's elevation onto the roof in front of it (1.2 m for a 1 m parapet
+    /// seen at 40°). A structure pixel with no such point near it casts as any obstacle does.
     pub fn new(
         camera: &CameraModel,
         mask: &ClassMask,
         points: &[[f32; 3]],
         is_obstacle: impl Fn(u8) -> bool,
+        is_structure: impl Fn(u8) -> bool,
     ) -> Self {
         let (w, h) = (mask.width() as usize, mask.height() as usize);
         let sx = f64::from(camera.width) / w as f64;
@@ -91,37 +101,43 @@ impl ObstacleRays {
         // The highest obstacle point of every CELL × CELL cell of the mask.
         let (cells_x, cells_y) = (w.div_ceil(CELL), h.div_ceil(CELL));
         let mut highest: Vec<Option<Point3<f64>>> = vec![None; cells_x * cells_y];
+        // Whether a point the mask calls structure fell in each cell.
+        let mut structure = vec![false; cells_x * cells_y];
         for p in points {
             let p = Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
             let Some((u, v)) = camera.project(&p) else {
                 continue;
             };
-            if !is_obstacle(mask.class_at_image_point(u, v, camera.width, camera.height)) {
+            let class = mask.class_at_image_point(u, v, camera.width, camera.height);
+            if !is_obstacle(class) {
                 continue;
             }
             // In the image (the lookup above said so): a cell of the mask.
             let (x, y) = ((u / sx) as usize, (v / sy) as usize);
-            let cell =
-                &mut highest[(y / CELL).min(cells_y - 1) * cells_x + (x / CELL).min(cells_x - 1)];
-            if cell.is_none_or(|c| p.z > c.z) {
-                *cell = Some(p);
+            let k = (y / CELL).min(cells_y - 1) * cells_x + (x / CELL).min(cells_x - 1);
+            if highest[k].is_none_or(|c| p.z > c.z) {
+                highest[k] = Some(p);
             }
+            structure[k] |= is_structure(class);
         }
-        // The highest of the 3 × 3 cells around each cell: what every block of that cell sees.
-        let near: Vec<Option<Point3<f64>>> = (0..cells_x * cells_y)
+        // The highest of the 3 × 3 cells around each cell, and whether any of them holds a
+        // structure point: what every block of that cell sees.
+        let near: Vec<(Option<Point3<f64>>, bool)> = (0..cells_x * cells_y)
             .map(|i| {
                 let (cx, cy) = (i % cells_x, i / cells_x);
-                let mut top: Option<Point3<f64>> = None;
+                let (mut top, mut seen): (Option<Point3<f64>>, bool) = (None, false);
                 for ny in cy.saturating_sub(1)..(cy + 2).min(cells_y) {
                     for nx in cx.saturating_sub(1)..(cx + 2).min(cells_x) {
-                        if let Some(p) = highest[ny * cells_x + nx]
+                        let k = ny * cells_x + nx;
+                        seen |= structure[k];
+                        if let Some(p) = highest[k]
                             && top.is_none_or(|t| p.z > t.z)
                         {
                             top = Some(p);
                         }
                     }
                 }
-                top
+                (top, seen)
             })
             .collect();
 
@@ -145,14 +161,21 @@ impl ObstacleRays {
                 for by in (ty..ty1).step_by(BLOCK) {
                     for bx in (tx..tx1).step_by(BLOCK) {
                         let (x1, y1) = ((bx + BLOCK).min(w), (by + BLOCK).min(h));
-                        let hit = (by..y1).any(|y| (bx..x1).any(|x| is_obstacle(data[y * w + x])));
-                        if !hit {
+                        let (mut hit, mut only_structure) = (false, true);
+                        for c in (by..y1).flat_map(|y| &data[y * w + bx..y * w + x1]) {
+                            if is_obstacle(*c) {
+                                hit = true;
+                                only_structure &= is_structure(*c);
+                            }
+                        }
+                        let (top, structure_seen) = near[(by / CELL) * cells_x + bx / CELL];
+                        if !hit || (only_structure && structure_seen) {
                             continue;
                         }
                         let u = (bx + x1) as f64 / 2.0 * sx;
                         let v = (by + y1) as f64 / 2.0 * sy;
                         rays.push(direction(u, v));
-                        tops.push(near[(by / CELL) * cells_x + bx / CELL]);
+                        tops.push(top);
                     }
                 }
                 if rays.len() > first {
@@ -490,6 +513,7 @@ mod tests {
                 &ClassMask::new(w as u32, h as u32, data).unwrap(),
                 &points,
                 |c| c != 4,
+                |_| false,
             );
             for _ in 0..5 {
                 let normal = Vector3::new(
@@ -546,13 +570,14 @@ mod tests {
             &ClassMask::new(100, 80, data).unwrap(),
             &[],
             |c| c != 4,
+            |_| false,
         );
         let clear = ClassMask::new(100, 80, vec![4u8; 100 * 80]).unwrap();
         // From 15 m above the same place the roof is clear; from 30 m east it is out of view.
-        let near = ObstacleRays::new(&nadir_camera_at(15.0), &clear, &[], |c| c != 4);
+        let near = ObstacleRays::new(&nadir_camera_at(15.0), &clear, &[], |c| c != 4, |_| false);
         let mut elsewhere = nadir_camera_at(15.0);
         elsewhere.pose.translation.vector.x = 30.0;
-        let elsewhere = ObstacleRays::new(&elsewhere, &clear, &[], |c| c != 4);
+        let elsewhere = ObstacleRays::new(&elsewhere, &clear, &[], |c| c != 4, |_| false);
 
         let alone = far.on_plane(roof.0, roof.1, roof.2);
         assert!(!alone.is_empty());
@@ -565,7 +590,7 @@ mod tests {
         // A newer view from about the same range adds to the older one instead of replacing it.
         let mut beside = nadir_camera_at(20.0);
         beside.pose.translation.vector.x = 0.5;
-        let beside = ObstacleRays::new(&beside, &clear, &[], |c| c != 4);
+        let beside = ObstacleRays::new(&beside, &clear, &[], |c| c != 4, |_| false);
         assert_eq!(cast(&[&far, &beside]), alone);
         let under = Point3::new(1.65, 2.85, 5.0);
         assert!(near.sees(&under) && !elsewhere.sees(&under));
@@ -579,7 +604,7 @@ mod tests {
         let mut data = vec![4u8; 100 * 80];
         data[21 * 100 + 61] = 7;
         let mask = ClassMask::new(100, 80, data).unwrap();
-        let rays = ObstacleRays::new(&camera, &mask, &[], |c| c != 4);
+        let rays = ObstacleRays::new(&camera, &mask, &[], |c| c != 4, |_| false);
         assert_eq!(rays.len(), 1);
         // On the roof 5 m up, 15 m below the camera: image (61, 21) is camera (0.11, -0.19) · 15.
         let disks = rays.on_plane(
@@ -649,7 +674,7 @@ mod tests {
         let roof = [[0.0f32, 0.0, 5.0], [-3.0, 2.0, 5.0]];
         let plane = ([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], [-50.0, -50.0, 50.0, 50.0]);
         let footprint = |points: &[[f32; 3]]| {
-            let rays = ObstacleRays::new(&camera, &blob_mask(), points, |c| c != 4);
+            let rays = ObstacleRays::new(&camera, &blob_mask(), points, |c| c != 4, |_| false);
             rays.on_plane(plane.0, plane.1, plane.2)
         };
         let with_height = footprint(&[roof[0], tank_top, roof[1]]);
@@ -660,13 +685,48 @@ mod tests {
         assert!(!covered(&assumed_low, 4.0, 0.0));
         assert!(covered(&assumed_low, 5.45, 0.0));
         // The normal's sign does not matter.
-        let rays = ObstacleRays::new(&camera, &blob_mask(), &[tank_top], |c| c != 4);
+        let rays = ObstacleRays::new(&camera, &blob_mask(), &[tank_top], |c| c != 4, |_| false);
         let flipped = rays.on_plane(plane.0, [0.0, 0.0, -1.0], plane.2);
         assert_eq!(flipped, with_height);
         // A point below the plane (the street seen past an edge, here at image (86.4, 40) too)
         // sweeps nothing back: one disk per block.
         let below = footprint(&[[6.92, 0.0, 1.0]]);
         assert_eq!(below.len(), rays.len());
+    }
+
+    #[test]
+    fn a_structure_the_scan_hit_casts_nothing() {
+        let camera = nadir_camera_at(20.0);
+        // A wall (class 3) one block wide, mask rows 30..50 at columns 70..72: ten blocks.
+        let wall = |vent_at: Option<usize>| {
+            let mut data = vec![4u8; 100 * 80];
+            for y in 30..50 {
+                for x in 70..72 {
+                    data[y * 100 + x] = 3;
+                }
+            }
+            if let Some(y) = vent_at {
+                data[y * 100 + 71] = 7;
+            }
+            ClassMask::new(100, 80, data).unwrap()
+        };
+        // A LiDAR point on the wall, 1 m above the roof at z = 5: image (71, 40), mask cell
+        // (8, 5). Its 3 × 3 cells hold every block of the wall but the first (rows 30..32).
+        let on_wall = [[2.94f32, 0.0, 6.0]];
+        // A point on the roof beside it, which the mask does not call structure.
+        let on_roof = [[1.5f32, 0.0, 5.0]];
+        let is_wall = |c: u8| c == 3;
+        let blocks = |mask: &ClassMask, points: &[[f32; 3]], structure: &dyn Fn(u8) -> bool| {
+            ObstacleRays::new(&camera, mask, points, |c| c != 4, structure).len()
+        };
+        assert_eq!(blocks(&wall(None), &on_wall, &is_wall), 1);
+        // Without the point, or with the roof's, nothing says the scan hit the wall.
+        assert_eq!(blocks(&wall(None), &[], &is_wall), 10);
+        assert_eq!(blocks(&wall(None), &on_roof, &is_wall), 10);
+        // Without structure classes every obstacle block casts.
+        assert_eq!(blocks(&wall(None), &on_wall, &|_| false), 10);
+        // A block that also holds another obstacle (an air vent before the wall) casts.
+        assert_eq!(blocks(&wall(Some(41)), &on_wall, &is_wall), 2);
     }
 
     #[test]
@@ -692,7 +752,7 @@ mod tests {
                 [x, y, 5.0 + next(8) as f32]
             })
             .collect();
-        let rays = ObstacleRays::new(&camera, &mask, &points, |c| c != 4);
+        let rays = ObstacleRays::new(&camera, &mask, &points, |c| c != 4, |_| false);
         let everything = [-1e6, -1e6, 1e6, 1e6];
         let all = rays.on_plane([0.0, 0.0, 5.0], [0.0, 0.0, 1.0], everything);
         assert!(all.len() > rays.len(), "some blocks sweep");

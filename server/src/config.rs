@@ -167,7 +167,7 @@ pub struct SegmentationConfig {
     /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
     /// sees rooftop-entrance tops best (EVALUATION.md). A fused stream's points take the first
     /// size's classes alone (its votes guard them); its keep-out footprints keep every size's
-    /// obstacles (`segmentation::PointMask`).
+    /// obstacles (`segmentation::Judged`).
     pub input_sizes: String,
     /// A pixel the model calls landable stays landable only when the model's confidence in it
     /// (its `confidence` output: the top class's probability) is at least this; 0 = off. Needs

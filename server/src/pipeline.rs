@@ -16,7 +16,7 @@ pub use crate::frame::{
     CameraImage, Cloud, Frame, FrameOptions, ImagePixels, Intrinsics, SegmentationMode,
 };
 use crate::geodetic::{Geodetic, enu_to_geodetic};
-use crate::segmentation::{self, PointMask, PointView, Segmenter};
+use crate::segmentation::{self, Judged, PointView, Segmenter};
 
 /// Time spent in each step; `None` for steps that did not run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -211,7 +211,7 @@ pub fn run_pipeline(
         relative_to(&world, origin),
         options,
         pipeline,
-        PointMask::Fused,
+        Judged::Alone,
     )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
@@ -276,15 +276,15 @@ pub fn run_fused(
     };
     let origin = map.origin_for(&scan);
     let by = to_local(origin) * correction;
-    // The votes of every frame that saw a cell guard its class: the points take the finest
-    // mask's classes (see PointMask).
+    // The votes of every frame that saw a cell guard its class, and several frames' keep-out
+    // footprints are kept (see Judged).
     let mut c = classify(
         frame,
         &by,
         relative_to(&points, origin),
         options,
         pipeline,
-        PointMask::Finest,
+        Judged::InStream,
     )?;
     let map_start = Instant::now();
     // How finely the frame's camera saw each place (the map's positions are world ones, the
@@ -355,8 +355,8 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points per the mode (`point_mask`: which of
-/// the model's masks, see [`PointMask`]). `world` is the cloud in the coordinates the frame's poses
+/// Decodes the frame's images and classifies its points per the mode and how the frame is
+/// `judged` ([`Judged`]). `world` is the cloud in the coordinates the frame's poses
 /// give once moved by `by` (frame-local ones from the callers above); the frame itself is not
 /// copied.
 fn classify(
@@ -365,7 +365,7 @@ fn classify(
     world: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
-    point_mask: PointMask,
+    judged: Judged,
 ) -> Result<Classified, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
@@ -394,7 +394,7 @@ fn classify(
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
             let out =
-                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, point_mask)?;
+                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, judged)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
@@ -407,8 +407,14 @@ fn classify(
                     "class image mode without a class image".into(),
                 ));
             };
-            let out =
-                segmentation::classify_with_mask(camera, by * camera.pose, mask, &world, landable);
+            let out = segmentation::classify_with_mask(
+                camera,
+                by * camera.pose,
+                mask,
+                &world,
+                landable,
+                judged,
+            );
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
             view = Some(out.view);

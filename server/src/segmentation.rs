@@ -5,6 +5,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
+use landing_geometry::SemanticClass;
 use landing_perception::{
     CameraModel, ClassMask, ExecutionProvider, ImageData, ObstacleRays, PerceptionError, RgbImage,
     SegmenterConfig, classify_points, decode_class_mask, decode_image,
@@ -156,7 +157,7 @@ impl Segmenter {
     /// Segments the decoded `image` at every input size, makes unknown the landable pixels the
     /// model is not confident enough in (`segmentation.min_confidence`), and fuses the masks (a
     /// pixel is landable only where every size says so). The obstacle rays always come from the
-    /// fused mask; the points take their classes from the mask `point_mask` names, then as
+    /// fused mask; the points take their classes from the mask `judged` names, then as
     /// [`classify_with_mask`] does.
     pub fn classify(
         &self,
@@ -165,7 +166,7 @@ impl Segmenter {
         image: &RgbImage,
         world_points: &[[f32; 3]],
         landable: &[u8],
-        point_mask: PointMask,
+        judged: Judged,
     ) -> Result<Classified, Error> {
         let t0 = Instant::now();
         let session =
@@ -191,30 +192,45 @@ impl Segmenter {
         let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
         let segmentation = t0.elapsed();
-        let for_points = match point_mask {
-            PointMask::Fused => &mask,
-            PointMask::Finest => &masks[0],
+        let for_points = match judged {
+            Judged::Alone => &mask,
+            Judged::InStream => &masks[0],
         };
         Ok(Classified {
             segmentation,
-            ..classify_with_masks(camera, pose, for_points, &mask, world_points, landable)
+            ..classify_with_masks(
+                camera,
+                pose,
+                for_points,
+                &mask,
+                world_points,
+                landable,
+                judged,
+            )
         })
     }
 }
 
-/// Which of a frame's masks gives its points their classes (the polygons); the obstacle rays,
-/// which safe circles keep clear of, always come from the fused mask.
+/// How a frame is judged: alone, or as one of a fused stream's frames. It decides which of the
+/// frame's masks gives its points their classes (the polygons; the obstacle rays, which safe
+/// circles keep clear of, always come from the fused mask), and whether a structure the scan
+/// hit casts keep-out footprints.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PointMask {
-    /// The masks of every input size fused: a point is landable only where every size says so.
-    /// A frame judged alone takes it (one frame's miss would be an unsafe site).
-    Fused,
-    /// The first (finest) input size's mask alone, the one with the highest rooftop recall. A
-    /// fused stream takes it: there a cell's class is the votes of every frame that saw it, an
-    /// obstacle vote outweighing several landable ones, so the guard's lost recall buys no
-    /// safety the votes and the keep-out footprints do not already give (EVALUATION.md,
-    /// "Fused points from the finest mask").
-    Finest,
+pub enum Judged {
+    /// Alone, where one frame's miss would be an unsafe site. The points take the masks of
+    /// every input size fused (a point is landable only where every size says so), and every
+    /// obstacle block casts its footprint.
+    Alone,
+    /// In a fused stream, where a cell's class is the votes of every frame that saw it, an
+    /// obstacle vote outweighing several landable ones, and the keep-out footprints of several
+    /// frames are kept. The points take the first (finest) input size's mask alone, the one
+    /// with the highest rooftop recall: the guard's lost recall buys no safety the votes and
+    /// the footprints do not already give (EVALUATION.md, "Fused points from the finest
+    /// mask"). A wall the scan hit casts nothing ([`ObstacleRays::new`]): its sweep kept a
+    /// band of free roof clear in front of every far parapet. A small obstacle the model calls
+    /// wall beside a real one loses its footprint in that frame, not in the stream's other
+    /// kept frames (EVALUATION.md, "Walls the scan hit").
+    InStream,
 }
 
 /// Whether a class is an obstacle for landing: any class outside `landable` but unknown (0),
@@ -223,17 +239,25 @@ fn obstacle_test(landable: &[u8]) -> impl Fn(u8) -> bool + '_ {
     move |c| c != 0 && !landable.contains(&c)
 }
 
+/// Whether a class is a structure too large for a scan to miss: a building's wall, which on a
+/// roof is a parapet's face or a taller neighbour's side ([`ObstacleRays::new`]).
+fn is_structure(class: u8) -> bool {
+    class == SemanticClass::BuildingWall as u8
+}
+
 /// Gives each world point the class of the pixel of `mask` (stretched over `camera`'s image) it
 /// projects to, and collects the rays of the obstacle pixels (classes outside `landable`).
 /// `pose` is the camera's in the coordinates of `world_points` (`camera.pose` moved with them).
+/// `judged` decides which structures cast footprints ([`Judged`]).
 pub fn classify_with_mask(
     camera: &CameraImage,
     pose: Isometry3<f64>,
     mask: &ClassMask,
     world_points: &[[f32; 3]],
     landable: &[u8],
+    judged: Judged,
 ) -> Classified {
-    classify_with_masks(camera, pose, mask, mask, world_points, landable)
+    classify_with_masks(camera, pose, mask, mask, world_points, landable, judged)
 }
 
 /// [`classify_with_mask`] with the points' classes from `point_mask` and the obstacle rays from
@@ -245,6 +269,7 @@ fn classify_with_masks(
     obstacle_mask: &ClassMask,
     world_points: &[[f32; 3]],
     landable: &[u8],
+    judged: Judged,
 ) -> Classified {
     let t = Instant::now();
     let k = camera.intrinsics;
@@ -258,7 +283,13 @@ fn classify_with_masks(
         height: k.height,
     };
     let classes = classify_points(world_points, &model, point_mask);
-    let obstacles = ObstacleRays::new(&model, obstacle_mask, world_points, obstacle_test(landable));
+    let obstacles = ObstacleRays::new(
+        &model,
+        obstacle_mask,
+        world_points,
+        obstacle_test(landable),
+        |c| judged == Judged::InStream && is_structure(c),
+    );
     Classified {
         classes,
         obstacles,
@@ -360,5 +391,60 @@ fn model_error(e: &PerceptionError) -> Error {
             Error::invalid(format!("frame.image.{field}"), e.to_string())
         }
         _ => Error::Segmentation(e.to_string()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::Intrinsics;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    /// A nadir camera 20 m above the origin (optical z down), 100 × 80 pixels, f = 100.
+    fn nadir_class_camera() -> CameraImage {
+        CameraImage {
+            pixels: ImagePixels::Encoded {
+                format: "png".into(),
+                data: vec![],
+            },
+            pose: Isometry3::from_parts(
+                Translation3::new(0.0, 0.0, 20.0),
+                UnitQuaternion::from_axis_angle(&nalgebra::Vector3::x_axis(), std::f64::consts::PI),
+            ),
+            intrinsics: Intrinsics {
+                width: 100,
+                height: 80,
+                fx: 100.0,
+                fy: 100.0,
+                cx: 50.0,
+                cy: 40.0,
+            },
+        }
+    }
+
+    #[test]
+    fn a_wall_the_scan_hit_casts_footprints_only_for_a_frame_judged_alone() {
+        let camera = nadir_class_camera();
+        // Rooftop, with a wall one block wide at mask columns 70..72, rows 30..50.
+        let mut data = vec![SemanticClass::BuildingRooftop as u8; 100 * 80];
+        for y in 30..50 {
+            for x in 70..72 {
+                data[y * 100 + x] = SemanticClass::BuildingWall as u8;
+            }
+        }
+        let mask = ClassMask::new(100, 80, data).unwrap();
+        // A LiDAR point on the wall, 1 m above a roof at z = 5, at the wall's image (71, 40)
+        // (the camera looks down the world's -z, its image x along world x).
+        let on_wall = [[2.94f32, 0.0, 6.0]];
+        let landable = [SemanticClass::BuildingRooftop as u8];
+        let blocks = |judged| {
+            classify_with_mask(&camera, camera.pose, &mask, &on_wall, &landable, judged)
+                .obstacles
+                .len()
+        };
+        assert_eq!(blocks(Judged::Alone), 10);
+        // In a stream, the blocks around the point cast nothing; the first block, out of its
+        // 3 × 3 mask cells, still does.
+        assert_eq!(blocks(Judged::InStream), 1);
     }
 }
