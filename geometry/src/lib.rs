@@ -89,6 +89,12 @@ pub struct Params {
     pub min_hole_area_m2: f64,
     /// At most this many sites are returned.
     pub max_sites: usize,
+    /// Close the regions' pinholes ([`regions::close_pinholes`]): for dense clouds, such as a
+    /// fused map's cells, where range noise tilts short triangles past `dot_min`. Off by default
+    /// and for a single scan, whose points are too sparse for a hole without a point of its own
+    /// to say it is empty (`EVALUATION.md`). Not a `landing.v1.PipelineOptions` field: the
+    /// service sets it for fused streams.
+    pub close_pinholes: bool,
 }
 
 impl Default for Params {
@@ -104,6 +110,7 @@ impl Default for Params {
             min_area_m2: 0.0,
             min_hole_area_m2: 0.0,
             max_sites: 16,
+            close_pinholes: false,
         }
     }
 }
@@ -392,7 +399,7 @@ fn run(
     let t2 = Instant::now();
     timings.triangle_filter = t2 - t1;
 
-    let regions = regions::extract_regions(
+    let mut regions = regions::extract_regions(
         &tri,
         &pts,
         mask,
@@ -400,6 +407,9 @@ fn run(
             min_triangles: params.min_region_triangles,
         },
     )?;
+    if params.close_pinholes {
+        regions::close_pinholes(&tri, &pts, &mut regions, params.l_max_m, params.z_min_m);
+    }
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 

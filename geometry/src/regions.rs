@@ -7,7 +7,7 @@
 
 use crate::GeometryError;
 use crate::filter::{cross, sub};
-use crate::triangulation::{EMPTY, Triangulation};
+use crate::triangulation::{EMPTY, Triangulation, next_halfedge};
 
 /// Parameters of [`extract_regions`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -133,10 +133,196 @@ pub fn extract_regions(
     Ok(Regions { regions, labels })
 }
 
+/// Most triangles in a pinhole that [`close_pinholes`] closes.
+pub const MAX_PINHOLE_TRIANGLES: usize = 8;
+
+/// A pinhole's points may span at most this many times `z_min` vertically.
+pub const PINHOLE_Z_FACTOR: f64 = 1.5;
+
+/// Closes the pinholes of `regions`: each connected set of at most [`MAX_PINHOLE_TRIANGLES`]
+/// triangles outside every region, all of whose neighbours are triangles of one region, that
+/// holds no point of its own (every vertex of its triangles is a vertex of that region), whose
+/// triangles have no edge of `l_max_m` or longer, and whose points span less than
+/// [`PINHOLE_Z_FACTOR`] × `z_min_m` vertically, joins that region.
+///
+/// Such a hole is no obstacle. An obstacle the scan hit has points inside its hole (its top, its
+/// sides, or a point whose class may not be landed on), and every point around a pinhole is a
+/// landable point of the plane. The pinhole is there because Algorithm 1 rejected the triangles
+/// between those points for their slope: in a dense cloud (a fused map's cells, 0.1-0.15 m
+/// apart) a few centimetres of range noise tilt a short triangle past `dot_min` with a vertical
+/// extent just over `z_min`, and one such pinhole in the middle of a roof caps every safe circle
+/// around it. A gap in the scan (an edge of `l_max_m` or more), a step between two planes (two
+/// regions around it) and anything taller are left as they are. The regions' plane statistics
+/// are not updated (the pinhole's points are already the region's).
+pub fn close_pinholes(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    regions: &mut Regions,
+    l_max_m: f64,
+    z_min_m: f64,
+) {
+    let n = tri.len();
+    let labels = &mut regions.labels;
+    let l_max2 = l_max_m * l_max_m;
+    let max_extent = PINHOLE_Z_FACTOR * z_min_m;
+    // Per triangle: the last search that met it, so a triangle seeds at most one search.
+    let mut seen = vec![false; n];
+    let mut pocket: Vec<u32> = Vec::with_capacity(MAX_PINHOLE_TRIANGLES + 1);
+    let mut rim: Vec<u32> = Vec::new();
+    for start in 0..n {
+        if labels[start] != EMPTY || seen[start] {
+            continue;
+        }
+        // The edge-connected set of unlabelled triangles around `start`, up to one too many.
+        pocket.clear();
+        rim.clear();
+        pocket.push(start as u32);
+        seen[start] = true;
+        let (mut region, mut closed) = (EMPTY, true);
+        let mut head = 0;
+        while head < pocket.len() && closed {
+            let t = pocket[head] as usize;
+            head += 1;
+            for e in 3 * t..3 * t + 3 {
+                let o = tri.halfedges[e];
+                if o == EMPTY {
+                    closed = false; // on the convex hull: open to the outside
+                    break;
+                }
+                let nt = o as usize / 3;
+                let label = labels[nt];
+                if label == EMPTY {
+                    if !pocket.contains(&(nt as u32)) {
+                        if pocket.len() == MAX_PINHOLE_TRIANGLES {
+                            closed = false;
+                            break;
+                        }
+                        seen[nt] = true;
+                        pocket.push(nt as u32);
+                    }
+                } else if region == EMPTY || region == label {
+                    region = label;
+                    // Both ends of an edge the pinhole shares with the region are on its rim.
+                    rim.push(tri.triangles[e]);
+                    rim.push(tri.triangles[next_halfedge(e)]);
+                } else {
+                    closed = false; // between two regions: a step, not a pinhole
+                    break;
+                }
+            }
+        }
+        if !closed || region == EMPTY {
+            continue;
+        }
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let pinhole = pocket.iter().all(|&t| {
+            let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
+            let [a, b, c] = [0, 1, 2].map(|k| points[v[k] as usize]);
+            for p in [a, b, c] {
+                lo = lo.min(p[2]);
+                hi = hi.max(p[2]);
+            }
+            let longest2 = dist2(a, b).max(dist2(b, c)).max(dist2(c, a));
+            v.iter().all(|i| rim.contains(i)) && longest2 < l_max2
+        }) && hi - lo < max_extent;
+        if pinhole {
+            for &t in &pocket {
+                labels[t as usize] = region;
+            }
+            regions.regions[region as usize]
+                .triangles
+                .extend_from_slice(&pocket);
+        }
+    }
+}
+
+fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::triangulation::{TriangulationConfig, triangulate};
+
+    /// A 0.15 m grid of 9 × 7 points at z = 0 (slightly jittered so the triangulation is
+    /// unique), triangulated.
+    fn grid() -> (Vec<[f64; 3]>, Triangulation) {
+        let mut pts = Vec::new();
+        for y in 0..7 {
+            for x in 0..9 {
+                let j = 0.001 * f64::from((x * 7 + y * 3) % 5);
+                pts.push([0.15 * f64::from(x) + j, 0.15 * f64::from(y) - j, 0.0]);
+            }
+        }
+        let tri = triangulate(&pts, &TriangulationConfig::default()).unwrap();
+        (pts, tri)
+    }
+
+    /// The triangles touching any of `points` (indices).
+    fn touching(tri: &Triangulation, points: &[usize]) -> Vec<bool> {
+        tri.triangles
+            .chunks_exact(3)
+            .map(|t| t.iter().any(|&v| points.contains(&(v as usize))))
+            .collect()
+    }
+
+    /// Regions of `tri` with `drop` triangles filtered out, pinholes closed; the number of
+    /// unlabelled triangles before and after.
+    fn close(pts: &[[f64; 3]], tri: &Triangulation, drop: &[bool], l_max: f64) -> (usize, usize) {
+        let keep = drop.iter().map(|d| !d).collect();
+        let mut r = extract_regions(tri, pts, keep, &RegionParams { min_triangles: 1 }).unwrap();
+        let holes = |r: &Regions| r.labels.iter().filter(|&&l| l == EMPTY).count();
+        let before = holes(&r);
+        close_pinholes(tri, pts, &mut r, l_max, 0.1);
+        let total: usize = r.regions.iter().map(|g| g.triangles.len()).sum();
+        assert_eq!(
+            total,
+            tri.len() - holes(&r),
+            "labels and region lists agree"
+        );
+        (before, holes(&r))
+    }
+
+    #[test]
+    fn a_pinhole_with_no_point_of_its_own_joins_its_region() {
+        let (mut pts, tri) = grid();
+        // The two triangles on the edge between points (4, 3) and (5, 3), inside the grid.
+        let (a, b) = (3 * 9 + 4, 3 * 9 + 5);
+        let pair: Vec<bool> = tri
+            .triangles
+            .chunks_exact(3)
+            .map(|t| t.contains(&(a as u32)) && t.contains(&(b as u32)))
+            .collect();
+        assert_eq!(pair.iter().filter(|&&d| d).count(), 2);
+        assert_eq!(close(&pts, &tri, &pair, 4.0), (2, 0));
+        // Not when a triangle has an edge of l_max or longer (a gap in the scan)...
+        assert_eq!(close(&pts, &tri, &pair, 0.15), (2, 2));
+        // ... nor when its points span 1.5 z_min or more (a step, not noise).
+        pts[a][2] = 0.16;
+        assert_eq!(close(&pts, &tri, &pair, 4.0), (2, 2));
+        pts[a][2] = 0.14;
+        assert_eq!(close(&pts, &tri, &pair, 4.0), (2, 0));
+    }
+
+    #[test]
+    fn a_hole_with_a_point_inside_or_open_or_large_stays() {
+        let (pts, tri) = grid();
+        // Every triangle around point (4, 3): the point is inside the hole (an obstacle's top).
+        let star = touching(&tri, &[3 * 9 + 4]);
+        let (before, after) = close(&pts, &tri, &star, 4.0);
+        assert!(before >= 4 && after == before, "{before} {after}");
+        // Around two neighbouring points: more triangles than a pinhole may have.
+        let big = touching(&tri, &[3 * 9 + 4, 3 * 9 + 5]);
+        let (before, after) = close(&pts, &tri, &big, 4.0);
+        assert!(before > MAX_PINHOLE_TRIANGLES && after == before);
+        // A triangle on the convex hull opens to the outside.
+        let on_hull = (0..tri.len())
+            .find(|&t| (0..3).any(|k| tri.halfedges[3 * t + k] == EMPTY))
+            .unwrap();
+        let corner: Vec<bool> = (0..tri.len()).map(|t| t == on_hull).collect();
+        assert_eq!(close(&pts, &tri, &corner, 4.0), (1, 1));
+    }
 
     #[test]
     fn a_removed_column_splits_a_grid_into_two_regions() {

@@ -220,13 +220,15 @@ pub fn run_pipeline(
         keep_out: &keep_out,
         unresolved: &[],
         origin,
+        params: &options.params,
     };
-    locate(frame, located, options, c.mode, c.timings, start)
+    locate(frame, located, c.mode, c.timings, start)
 }
 
 /// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
 /// stream's `map`, and the answer is computed from all the map's points (what the approach has
-/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers.
+/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers,
+/// with the pinholes of its dense planes closed (`Params::close_pinholes`).
 /// `reset` starts the map over first. A frame without a timestamp counts as taken at the
 /// previous frame's time. The frame-local coordinates are the map's own (its origin), so that
 /// the keep-out footprints of every kept frame share them.
@@ -317,14 +319,20 @@ pub fn run_fused(
         reset: reset.map(|r| r.to_string()),
         keep_out_frames: keep_out.len(),
     };
+    // The map's cells are dense: range noise punches pinholes into its planes.
+    let params = Params {
+        close_pinholes: true,
+        ..options.params.clone()
+    };
     let located = Located {
         world: &world,
         classes: fused.classes.as_deref(),
         keep_out: &keep_out,
         unresolved: &fused.unresolved,
         origin,
+        params: &params,
     };
-    let mut out = locate(frame, located, options, c.mode, c.timings, start)?;
+    let mut out = locate(frame, located, c.mode, c.timings, start)?;
     out.fusion = Some(summary);
     Ok(out)
 }
@@ -448,13 +456,14 @@ struct Located<'a> {
     /// roof).
     unresolved: &'a [bool],
     origin: [f64; 3],
+    /// The request's parameters, or the fused stream's form of them.
+    params: &'a Params,
 }
 
 /// The geometry on classified frame-local points, and the world/geodetic results.
 fn locate(
     frame: &Frame,
     input: Located<'_>,
-    options: &FrameOptions,
     mode: SegmentationMode,
     mut timings: StageTimings,
     start: Instant,
@@ -465,12 +474,13 @@ fn locate(
         keep_out,
         unresolved,
         origin,
+        params,
     } = input;
 
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
     // what fell between the LiDAR's scan lines.
     let detection = if keep_out.is_empty() && unresolved.is_empty() {
-        landing_geometry::detect(world, classes, &options.params)?
+        landing_geometry::detect(world, classes, params)?
     } else {
         // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
         // its view decides.
@@ -484,7 +494,7 @@ fn locate(
             disks: Some(&disks),
             points: (!unresolved.is_empty()).then_some(unresolved),
         };
-        landing_geometry::detect_keeping_out(world, classes, &options.params, keep_clear)?
+        landing_geometry::detect_keeping_out(world, classes, params, keep_clear)?
     };
     let t = detection.timings;
     timings.triangulation = Some(t.triangulation);
