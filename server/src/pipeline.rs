@@ -672,4 +672,38 @@ mod tests {
         assert_eq!(out.segmentation_mode, SegmentationMode::None);
         assert!(out.timings.total.is_some());
     }
+
+    #[test]
+    fn a_fused_answer_closes_the_pinholes_a_frame_judged_alone_keeps() {
+        // A 12 m roof of points 0.3 m apart (one a map cell), 20 m below the LiDAR, and 25 pairs
+        // of neighbours 0.12 m apart in height: the two triangles on each pair's edge tilt past
+        // dot_min, a hole with no point of its own.
+        let mut points = Vec::new();
+        for y in 0..40 {
+            for x in 0..40 {
+                let jitter = 0.003 * f64::from((x * 7 + y * 3) % 5);
+                let dz = match (x % 8, y % 8) {
+                    (3, 3) => 0.06,
+                    (4, 3) => -0.06,
+                    _ => 0.0,
+                };
+                let at = |i: i32| 0.3 * f64::from(i) - 6.0;
+                points.push([at(x) + jitter, at(y) - jitter, -20.0 + dz]);
+            }
+        }
+        let classes = vec![landing_geometry::SemanticClass::BuildingRooftop as u8; points.len()];
+        let f = frame(points, Some(classes));
+        let (options, pipeline) = (FrameOptions::default(), Pipeline::default());
+        let holes = |out: &FrameOutput| out.sites.iter().map(|s| s.holes.len()).sum::<usize>();
+        assert_eq!(holes(&run_pipeline(&f, &options, &pipeline).unwrap()), 25);
+        // No camera resolves the cells here: the resolution rule off.
+        let params = landing_fusion::FusionParams {
+            max_footprint_m: 0.0,
+            ..crate::Config::default().fusion.params()
+        };
+        let mut map = StreamMap::new(params).unwrap();
+        let fused = run_fused(&f, &options, &pipeline, &mut map, false).unwrap();
+        assert_eq!(fused.sites.len(), 1);
+        assert_eq!(holes(&fused), 0);
+    }
 }
