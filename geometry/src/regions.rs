@@ -6,7 +6,7 @@
 //! same pass, while the triangle's points are in cache.
 
 use crate::GeometryError;
-use crate::filter::{cross, sub};
+use crate::filter::{cross, norm2, sub};
 use crate::triangulation::{EMPTY, Triangulation, next_halfedge};
 
 /// Parameters of [`extract_regions`].
@@ -165,7 +165,7 @@ pub fn close_pinholes(
     let labels = &mut regions.labels;
     let l_max2 = l_max_m * l_max_m;
     let max_extent = PINHOLE_Z_FACTOR * z_min_m;
-    // Per triangle: the last search that met it, so a triangle seeds at most one search.
+    // Per triangle: whether a search has met it, so that a triangle is searched at most once.
     let mut seen = vec![false; n];
     let mut pocket: Vec<u32> = Vec::with_capacity(MAX_PINHOLE_TRIANGLES + 1);
     let mut rim: Vec<u32> = Vec::new();
@@ -214,17 +214,20 @@ pub fn close_pinholes(
         if !closed || region == EMPTY {
             continue;
         }
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let pinhole = pocket.iter().all(|&t| {
-            let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
-            let [a, b, c] = [0, 1, 2].map(|k| points[v[k] as usize]);
-            for p in [a, b, c] {
-                lo = lo.min(p[2]);
-                hi = hi.max(p[2]);
-            }
-            let longest2 = dist2(a, b).max(dist2(b, c)).max(dist2(c, a));
-            v.iter().all(|i| rim.contains(i)) && longest2 < l_max2
-        }) && hi - lo < max_extent;
+        // With every vertex on the rim (checked below), the rim's points are the pinhole's.
+        let (lo, hi) = rim
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &i| {
+                let z = points[i as usize][2];
+                (lo.min(z), hi.max(z))
+            });
+        let pinhole = hi - lo < max_extent
+            && pocket.iter().all(|&t| {
+                let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
+                let [a, b, c] = [0, 1, 2].map(|k| points[v[k] as usize]);
+                let longest2 = norm2(sub(b, a)).max(norm2(sub(c, b))).max(norm2(sub(a, c)));
+                v.iter().all(|i| rim.contains(i)) && longest2 < l_max2
+            });
         if pinhole {
             for &t in &pocket {
                 labels[t as usize] = region;
@@ -234,10 +237,6 @@ pub fn close_pinholes(
                 .extend_from_slice(&pocket);
         }
     }
-}
-
-fn dist2(a: [f64; 3], b: [f64; 3]) -> f64 {
-    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
 }
 
 #[cfg(test)]
