@@ -165,10 +165,17 @@ pub struct SegmentationConfig {
     /// size says so (`landing_perception::ClassMask::fuse_keeping_obstacles`). "" = once, at the
     /// size in the model's metadata. The default runs the shipped model (trained at 256 × 192) at
     /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
-    /// sees rooftop-entrance tops best (EVALUATION.md). A fused stream's points take the first
-    /// size's classes alone (its votes guard them); its keep-out footprints keep every size's
-    /// obstacles (`segmentation::Judged`).
+    /// sees rooftop-entrance tops best (EVALUATION.md). A fused stream's frames run the first
+    /// size alone unless `stream_every_size` is set (`segmentation::Judged`).
     pub input_sizes: String,
+    /// Whether a fused stream's frames are segmented at every input size too, their keep-out
+    /// footprints keeping every size's obstacles. Off by default: in a stream the first
+    /// (finest) size alone classes the points and casts the footprints, for one inference a
+    /// frame instead of one a size. The guard there is the stream's: every frame that saw a
+    /// cell votes on its class, and the kept frames' footprints are cast together. Measured on
+    /// seven stream sets: no unsafe site either way, larger circles with one size
+    /// (EVALUATION.md, "One input size in streams").
+    pub stream_every_size: bool,
     /// A pixel the model calls landable stays landable only when the model's confidence in it
     /// (its `confidence` output: the top class's probability) is at least this; 0 = off. Needs
     /// a model with the output: `models/rooftop-segmentation-confidence.onnx`, not the default
@@ -240,6 +247,7 @@ impl Default for SegmentationConfig {
             sessions: 1,
             ort_library: PathBuf::new(),
             input_sizes: "320x240,256x192".into(),
+            stream_every_size: false,
             min_confidence: 0.0,
             ort_log_level: landing_perception::OrtLogLevel::default().to_string(),
         }

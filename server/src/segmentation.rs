@@ -58,6 +58,8 @@ pub struct Segmenter {
     /// `segmentation.min_confidence` as the model's confidence byte (255 × probability); `None`
     /// when off.
     min_confidence: Option<u8>,
+    /// `segmentation.stream_every_size`: a fused stream's frames run every size, not the first.
+    stream_every_size: bool,
 }
 
 impl Segmenter {
@@ -117,6 +119,7 @@ impl Segmenter {
             next: AtomicUsize::new(0),
             sizes,
             min_confidence,
+            stream_every_size: config.stream_every_size,
         })
     }
 
@@ -131,8 +134,13 @@ impl Segmenter {
         let confidence = self
             .min_confidence
             .map_or(String::new(), |c| format!(", confidence ≥ {c}/255"));
+        let streams = if self.sizes.len() > 1 && !self.stream_every_size {
+            format!(", streams at {}", sizes[0])
+        } else {
+            String::new()
+        };
         format!(
-            "{} (at {}{confidence}, {}, {} session(s), sha256 {})",
+            "{} (at {}{streams}{confidence}, {}, {} session(s), sha256 {})",
             i.name,
             sizes.join(" + "),
             i.execution_provider,
@@ -154,11 +162,11 @@ impl Segmenter {
         }
     }
 
-    /// Segments the decoded `image` at every input size, makes unknown the landable pixels the
-    /// model is not confident enough in (`segmentation.min_confidence`), and fuses the masks (a
-    /// pixel is landable only where every size says so). The obstacle rays always come from the
-    /// fused mask; the points take their classes from the mask `judged` names, then as
-    /// [`classify_with_mask`] does.
+    /// Segments the decoded `image` at the input sizes `judged` names (every one, or a fused
+    /// stream's first alone), makes unknown the landable pixels the model is not confident
+    /// enough in (`segmentation.min_confidence`), and fuses the masks (a pixel is landable only
+    /// where every size says so). The obstacle rays always come from the fused mask; the points
+    /// take their classes from the mask `judged` names, then as [`classify_with_mask`] does.
     pub fn classify(
         &self,
         camera: &CameraImage,
@@ -172,8 +180,11 @@ impl Segmenter {
         let session =
             &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
         let landable_class = |c: u8| landable.contains(&c);
-        let masks = self
-            .sizes
+        let sizes = match judged {
+            Judged::InStream if !self.stream_every_size => &self.sizes[..1],
+            Judged::Alone | Judged::InStream => &self.sizes[..],
+        };
+        let masks = sizes
             .iter()
             .map(|&(w, h)| {
                 let Some(min) = self.min_confidence else {
@@ -226,7 +237,9 @@ pub enum Judged {
     /// frames are kept. The points take the first (finest) input size's mask alone, the one
     /// with the highest rooftop recall: the guard's lost recall buys no safety the votes and
     /// the footprints do not already give (EVALUATION.md, "Fused points from the finest
-    /// mask"). A wall the scan hit casts nothing ([`ObstacleRays::new`]): its sweep kept a
+    /// mask"). Unless `segmentation.stream_every_size` is set, that size is the only one run,
+    /// and casts the footprints too (EVALUATION.md, "One input size in streams"); with it,
+    /// the footprints keep every size's obstacles. A wall the scan hit casts nothing ([`ObstacleRays::new`]): its sweep kept a
     /// band of free roof clear in front of every far parapet. A small obstacle the model calls
     /// wall beside a real one loses its footprint in that frame, not in the stream's other
     /// kept frames (EVALUATION.md, "Walls the scan hit").

@@ -1,7 +1,7 @@
 //! Approach fusion over a real stream: answers come from the stream's map, equal to the
 //! in-process fused pipeline frame by frame; the map resets on request; bad options name their
-//! field; the defaults are reported; a fused frame's points take the finest segmentation mask
-//! while its keep-out footprints keep every size's obstacles.
+//! field; the defaults are reported; a fused frame's points and keep-out footprints take the
+//! finest segmentation mask alone.
 
 use landing_client::v1::{self, SegmentationMode};
 use landing_client::{FrameOutcome, StreamConfig};
@@ -152,13 +152,14 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
     server.stop().await;
 }
 
-/// A fused stream's points take the finest input size's classes (the votes of every frame that
-/// sees a cell guard them), while its keep-out footprints keep every size's obstacles, as a
-/// frame judged alone does, but for the walls the scan hit: on a real frame the finest mask
-/// calls more points landable, never fewer, and the stream's footprints are the lone frame's
-/// less some.
+/// A fused stream's frames run the finest input size alone, whose classes their points take
+/// (the votes of every frame that sees a cell guard them) and whose obstacles cast their
+/// keep-out footprints; with `stream_every_size` the footprints keep every size's obstacles, as
+/// a frame judged alone does, but for the walls the scan hit. On a real frame the finest mask
+/// calls more points landable, never fewer; every size's footprints in a stream are the lone
+/// frame's less some, and one size casts fewer.
 #[test]
-fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
+fn fused_points_take_the_finest_mask_and_keep_out_its_obstacles() {
     use landing_server::segmentation::{self, Judged};
 
     let server_config = crate::support::server_config();
@@ -166,7 +167,13 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
         eprintln!("skipped: no model or ONNX Runtime library");
         return;
     }
+    assert!(!server_config.segmentation.stream_every_size);
     let segmenter = segmentation::Segmenter::load(&server_config.segmentation).unwrap();
+    let every_size = segmentation::Segmenter::load(&landing_server::config::SegmentationConfig {
+        stream_every_size: true,
+        ..server_config.segmentation.clone()
+    })
+    .unwrap();
     let request = v1::DetectLandingSitesRequest {
         frame: Some(scene(34).frames[2].frame.clone()),
         options: Some(mode(SegmentationMode::Model)),
@@ -180,12 +187,15 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
         .map(|p| p.map(|v| v as f32))
         .collect();
     let landable = &options.params.landable_classes;
-    let classify = |mask| {
+    let classify = |segmenter: &segmentation::Segmenter, judged| {
         segmenter
-            .classify(camera, camera.pose, &rgb, &points, landable, mask)
+            .classify(camera, camera.pose, &rgb, &points, landable, judged)
             .unwrap()
     };
-    let (guarded, finest) = (classify(Judged::Alone), classify(Judged::InStream));
+    let guarded = classify(&segmenter, Judged::Alone);
+    let finest = classify(&segmenter, Judged::InStream);
+    let finest_every_size = classify(&every_size, Judged::InStream);
+    assert_eq!(finest.classes, finest_every_size.classes);
     let is_landable = |c: &u8| landable.contains(c);
     for (i, (g, f)) in guarded.classes.iter().zip(&finest.classes).enumerate() {
         assert!(
@@ -204,14 +214,21 @@ fn fused_points_take_the_finest_mask_and_keep_out_every_size_s_obstacles() {
     let mut heights: Vec<f64> = points.iter().map(|p| f64::from(p[2])).collect();
     heights.sort_by(f64::total_cmp);
     let roof = [0.0, 0.0, heights[heights.len() / 10]];
-    let plane = (roof, [0.0, 0.0, 1.0], [-1e4, -1e4, 1e4, 1e4]);
-    let guarded_disks = guarded.obstacles.on_plane(plane.0, plane.1, plane.2);
-    assert!(!guarded_disks.is_empty());
-    let stream_disks = finest.obstacles.on_plane(plane.0, plane.1, plane.2);
-    assert!(!stream_disks.is_empty());
+    let disks = |c: &segmentation::Classified| {
+        c.obstacles
+            .on_plane(roof, [0.0, 0.0, 1.0], [-1e4, -1e4, 1e4, 1e4])
+    };
+    let (alone, every, one) = (disks(&guarded), disks(&finest_every_size), disks(&finest));
+    assert!(!one.is_empty());
     assert!(
-        stream_disks.iter().all(|d| guarded_disks.contains(d)),
-        "a stream's footprints are a lone frame's, less the walls the scan hit"
+        every.iter().all(|d| alone.contains(d)),
+        "every size's footprints in a stream are a lone frame's, less the walls the scan hit"
+    );
+    assert!(
+        one.len() < every.len(),
+        "the coarser size adds obstacles: {} vs {}",
+        one.len(),
+        every.len()
     );
 }
 
