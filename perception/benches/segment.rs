@@ -72,6 +72,26 @@ fn bench(c: &mut Criterion) {
         let big = image::imageops::resize(&image, 640, 480, image::imageops::FilterType::Triangle);
         b.iter(|| preprocess(black_box(&big), 256, 192))
     });
+    // The service's second input size from the simulator camera's 320 × 240, and the same
+    // resampling by `image`'s generic resize (bit-identical; what `preprocess` used before).
+    let camera_size =
+        image::imageops::resize(&image, 320, 240, image::imageops::FilterType::Triangle);
+    c.bench_function("preprocess/320x240_to_256x192", |b| {
+        b.iter(|| preprocess(black_box(&camera_size), 256, 192))
+    });
+    c.bench_function("image_resize/320x240_to_256x192", |b| {
+        b.iter(|| {
+            image::imageops::resize(
+                black_box(&camera_size),
+                256,
+                192,
+                image::imageops::FilterType::Triangle,
+            )
+        })
+    });
+    c.bench_function("preprocess/320x240_no_resize", |b| {
+        b.iter(|| preprocess(black_box(&camera_size), 320, 240))
+    });
     let (camera, points) = scene(w, h);
     let mask = segmenter(1, None).segment(&image).expect("segment");
     c.bench_function("classify_points/20k", |b| {
