@@ -224,8 +224,8 @@ fn packed_rows(
 /// The resampling is `image::imageops::resize` with `FilterType::Triangle` to the bit (the same
 /// taps and weights, the same float operations in the same order, rounded to 8 bits as it
 /// rounds), done row by row on flat buffers and written straight into the planes: the generic
-/// version, pixel by pixel and column by column, took a third of a frame's time outside the
-/// model (BENCHMARKS.md, "Preprocessing").
+/// version, pixel by pixel and column by column, took about a quarter of a frame's time outside
+/// the model (BENCHMARKS.md, "One input size in streams; faster preprocessing").
 pub fn preprocess(image: &RgbImage, width: u32, height: u32) -> Vec<f32> {
     let plane = width as usize * height as usize;
     let mut out = vec![0.0f32; 3 * plane];

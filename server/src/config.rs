@@ -173,7 +173,7 @@ pub struct SegmentationConfig {
     /// (finest) size alone classes the points and casts the footprints, for one inference a
     /// frame instead of one a size. The guard there is the stream's: every frame that saw a
     /// cell votes on its class, and the kept frames' footprints are cast together. Measured on
-    /// seven stream sets: no unsafe site either way, larger circles with one size
+    /// eight stream sets: no unsafe site either way, larger circles with one size
     /// (EVALUATION.md, "One input size in streams").
     pub stream_every_size: bool,
     /// A pixel the model calls landable stays landable only when the model's confidence in it
