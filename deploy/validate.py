@@ -87,6 +87,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "sessions": int,
         "ort_library": str,
         "input_sizes": str,
+        "stream_every_size": bool,
         "min_confidence": (int, float),
         "ort_log_level": str,
     },
