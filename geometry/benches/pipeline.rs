@@ -134,6 +134,13 @@ fn benches(c: &mut Criterion) {
                     .unwrap()
             })
         });
+        // A fused map's polygons end at midpoints (the service's limit: two 0.15 m cells).
+        let midpoints = BoundaryParams {
+            midpoint_max_edge_m: 0.3,
+        };
+        g.bench_function(BenchmarkId::new("step_polygons_midpoints", label), |b| {
+            b.iter(|| region_polygons(black_box(&tri), &pts, &regions, &midpoints).unwrap())
+        });
         let polygons = region_polygons(&tri, &pts, &regions, &BoundaryParams::default()).unwrap();
         let ranking = RankingParams::from(&params);
         g.bench_function(BenchmarkId::new("step_polylabel_rank", label), |b| {

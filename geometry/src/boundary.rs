@@ -16,10 +16,18 @@
 use crate::triangulation::{EMPTY, Triangulation, coord, next_halfedge};
 use crate::{GeometryError, Polygon, regions::Regions};
 
-/// Parameters of [`region_polygons`]. There are no knobs yet; the struct keeps the entry point's
-/// shape stable.
-#[derive(Debug, Clone, PartialEq, Eq, Default)]
-pub struct BoundaryParams {}
+/// Parameters of [`region_polygons`]. `Default` traces the paper's polygons: each region's own
+/// boundary edges.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BoundaryParams {
+    /// Edges to midpoints: where a boundary edge `a → b` faces a triangle `b a c` of no region
+    /// whose third point `c` is not a point of the region and lies within this of both `a` and
+    /// `b` (x/y, metres), the ring runs `a → mid(a, c) → mid(b, c) → b` instead: the polygon ends
+    /// halfway to the first point that is not part of it, not at its last point. Each such
+    /// triangle is empty (Delaunay) and belongs to no region, so the polygon grows by part of
+    /// it and covers no other point and no other region. 0 (the default) turns it off.
+    pub midpoint_max_edge_m: f64,
+}
 
 /// One polygon per region of `regions`, in the same order.
 ///
@@ -29,24 +37,75 @@ pub fn region_polygons(
     tri: &Triangulation,
     points: &[[f64; 3]],
     regions: &Regions,
-    _params: &BoundaryParams,
+    params: &BoundaryParams,
 ) -> Result<Vec<Polygon>, GeometryError> {
     let mut scratch = Scratch::for_points(points.len());
+    let grow = params.midpoint_max_edge_m > 0.0;
+    if grow {
+        scratch.member.resize(points.len(), false);
+    }
     regions
         .regions
         .iter()
         .enumerate()
         .map(|(r, region)| {
+            let midpoints = grow.then_some(Midpoints {
+                labels: &regions.labels,
+                max_edge_m: params.midpoint_max_edge_m,
+            });
             region_polygon(
                 tri,
                 points,
                 &regions.labels,
                 r as u32,
                 &region.triangles,
+                midpoints,
                 &mut scratch,
             )
         })
         .collect()
+}
+
+/// Where a region's edges run to midpoints ([`BoundaryParams::midpoint_max_edge_m`]).
+struct Midpoints<'a> {
+    /// Every triangle's region, or [`EMPTY`].
+    labels: &'a [u32],
+    max_edge_m: f64,
+}
+
+/// A vertex of a ring: a point of the mesh, or the midpoint of two.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Vertex {
+    Point(u32),
+    Mid(u32, u32),
+}
+
+impl Midpoints<'_> {
+    /// The third point of the triangle that boundary half-edge `e` faces, when the ring detours
+    /// through it: the triangle is in no region, its third point is not a `member` of this
+    /// region, and that point is within `max_edge_m` of both ends of `e`.
+    fn third(
+        &self,
+        tri: &Triangulation,
+        points: &[[f64; 3]],
+        member: &[bool],
+        e: usize,
+    ) -> Option<u32> {
+        let o = tri.halfedges[e];
+        if o == EMPTY || self.labels[o as usize / 3] != EMPTY {
+            return None;
+        }
+        let c = tri.triangles[next_halfedge(next_halfedge(o as usize))];
+        if member[c as usize] {
+            return None;
+        }
+        let near = |v: u32| {
+            let (p, q) = (points[v as usize], points[c as usize]);
+            (p[0] - q[0]).hypot(p[1] - q[1]) <= self.max_edge_m
+        };
+        let (a, b) = (tri.triangles[e], tri.triangles[next_halfedge(e)]);
+        (near(a) && near(b)).then_some(c)
+    }
 }
 
 /// Buffers reused across regions.
@@ -59,6 +118,8 @@ struct Scratch {
     /// Boundary half-edges of the current region, ascending.
     edges: Vec<u32>,
     used: Vec<bool>,
+    /// Per point: whether it is a vertex of the current region (only when growing to midpoints).
+    member: Vec<bool>,
 }
 
 /// Closed rings of x/y points (not repeating the first at the end).
@@ -86,7 +147,13 @@ pub fn region_parts(
             }
             let inside = |t: usize| regions.labels[t] == r as u32 && keep(t as u32);
             let kept = region.triangles.iter().copied().filter(|&t| keep(t));
-            boundary_rings(tri, points, kept, inside, &mut scratch).map(Some)
+            let loops = boundary_loops(tri, points, kept, inside, &mut scratch)?;
+            Ok(Some(
+                loops
+                    .iter()
+                    .map(|l| ring_of(tri, points, l, None, &scratch))
+                    .collect(),
+            ))
         })
         .collect()
 }
@@ -106,10 +173,28 @@ fn region_polygon(
     labels: &[u32],
     label: u32,
     triangles: &[u32],
+    midpoints: Option<Midpoints<'_>>,
     s: &mut Scratch,
 ) -> Result<Polygon, GeometryError> {
     let inside = |t: usize| labels[t] == label;
-    let rings = boundary_rings(tri, points, triangles.iter().copied(), inside, s)?;
+    let loops = boundary_loops(tri, points, triangles.iter().copied(), inside, s)?;
+    let mark = |member: &mut [bool], on: bool| {
+        for &t in triangles {
+            for &v in &tri.triangles[3 * t as usize..3 * t as usize + 3] {
+                member[v as usize] = on;
+            }
+        }
+    };
+    if midpoints.is_some() {
+        mark(&mut s.member, true);
+    }
+    let rings: Rings = loops
+        .iter()
+        .map(|l| ring_of(tri, points, l, midpoints.as_ref(), s))
+        .collect();
+    if midpoints.is_some() {
+        mark(&mut s.member, false);
+    }
     let mut shell = None;
     let mut holes = Vec::new();
     for ring in rings {
@@ -138,15 +223,15 @@ fn region_polygon(
     Ok(Polygon { shell, holes })
 }
 
-/// The rings bounding `triangles`, whose neighbours count as the same set where `inside` says
+/// The loops bounding `triangles`, whose neighbours count as the same set where `inside` says
 /// so: their boundary half-edges walked head to tail.
-fn boundary_rings(
+fn boundary_loops(
     tri: &Triangulation,
     points: &[[f64; 3]],
     triangles: impl Iterator<Item = u32>,
     inside: impl Fn(usize) -> bool,
     s: &mut Scratch,
-) -> Result<Rings, GeometryError> {
+) -> Result<Vec<Vec<u32>>, GeometryError> {
     s.edges.clear();
     for t in triangles {
         for e in 3 * t as usize..3 * t as usize + 3 {
@@ -168,20 +253,85 @@ fn boundary_rings(
         s.chain[i] = s.head[v];
         s.head[v] = i as u32;
     }
-    let result = trace_rings(tri, points, s);
+    let result = trace_loops(tri, points, s);
     for &e in &s.edges {
         s.head[tri.triangles[e as usize] as usize] = EMPTY;
     }
     result
 }
 
-/// Follows the boundary edges in `s.edges` into rings of coordinates, each rotated to start at its
-/// smallest vertex.
-fn trace_rings(
+/// The ring of coordinates of a loop of boundary half-edges, detouring through midpoints where
+/// `midpoints` says so, rotated to start at its smallest vertex.
+fn ring_of(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    edges: &[u32],
+    midpoints: Option<&Midpoints<'_>>,
+    s: &Scratch,
+) -> Vec<[f64; 2]> {
+    // Two detour triangles that share the edge a–c around a meet at its midpoint: the ring would
+    // run mid(a, c) → a → mid(a, c), a spike with no area, so a and the repeated midpoint go.
+    let spike = |m: Vertex, a: Vertex, n: Vertex| {
+        matches!(a, Vertex::Point(_)) && matches!(m, Vertex::Mid(..)) && m == n
+    };
+    let mut ring: Vec<Vertex> = Vec::with_capacity(edges.len());
+    let push = |ring: &mut Vec<Vertex>, v: Vertex| {
+        let n = ring.len();
+        if n >= 2 && spike(ring[n - 2], ring[n - 1], v) {
+            ring.pop();
+        } else {
+            ring.push(v);
+        }
+    };
+    for &e in edges {
+        let e = e as usize;
+        let a = tri.triangles[e];
+        push(&mut ring, Vertex::Point(a));
+        if let Some(c) = midpoints.and_then(|m| m.third(tri, points, &s.member, e)) {
+            let b = tri.triangles[next_halfedge(e)];
+            push(&mut ring, Vertex::Mid(a.min(c), a.max(c)));
+            push(&mut ring, Vertex::Mid(b.min(c), b.max(c)));
+        }
+    }
+    // The same where the ring closes: a spike across its end, or across its start.
+    let mut start = 0;
+    while ring.len() - start > 3 {
+        let n = ring.len();
+        if spike(ring[n - 2], ring[n - 1], ring[start]) {
+            ring.truncate(n - 2);
+        } else if spike(ring[n - 1], ring[start], ring[start + 1]) {
+            start += 2;
+        } else {
+            break;
+        }
+    }
+    let xy = |v: u32| {
+        let p = points[v as usize];
+        [p[0], p[1]]
+    };
+    let mut ring: Vec<[f64; 2]> = ring[start..]
+        .iter()
+        .map(|v| match *v {
+            Vertex::Point(a) => xy(a),
+            Vertex::Mid(a, c) => {
+                let (p, q) = (xy(a), xy(c));
+                [(p[0] + q[0]) / 2.0, (p[1] + q[1]) / 2.0]
+            }
+        })
+        .collect();
+    let min = (0..ring.len())
+        .min_by(|&i, &j| lex(ring[i], ring[j]))
+        .unwrap_or(0);
+    ring.rotate_left(min);
+    ring
+}
+
+/// Follows the boundary edges in `s.edges` into loops of half-edges.
+fn trace_loops(
     tri: &Triangulation,
     points: &[[f64; 3]],
     s: &mut Scratch,
-) -> Result<Vec<Vec<[f64; 2]>>, GeometryError> {
+) -> Result<Vec<Vec<u32>>, GeometryError> {
     let m = s.edges.len();
     let xy = |v: u32| {
         let p = points[v as usize];
@@ -207,7 +357,7 @@ fn trace_rings(
             let e = s.edges[cur] as usize;
             let a = tri.triangles[e];
             let b = tri.triangles[next_halfedge(e)];
-            ring.push(xy(a));
+            ring.push(e as u32);
             // Candidates: the unused outgoing boundary edges at b, and the ring's first edge.
             let mut best = EMPTY;
             let mut c = s.head[b as usize];
@@ -246,10 +396,6 @@ fn trace_rings(
             }
             cur = best as usize;
         }
-        let min = (0..ring.len())
-            .min_by(|&i, &j| lex(ring[i], ring[j]))
-            .unwrap_or(0);
-        ring.rotate_left(min);
         rings.push(ring);
     }
     Ok(rings)

@@ -95,6 +95,14 @@ pub struct Params {
     /// to say it is empty (`EVALUATION.md`). Not a `landing.v1.PipelineOptions` field: the
     /// service sets it for fused streams.
     pub close_pinholes: bool,
+    /// Landing polygons end halfway to the first point that is not theirs, where that point is
+    /// within this of the edge's ends ([`boundary::BoundaryParams::midpoint_max_edge_m`]); the
+    /// safe circles stay inside the polygons without it, so this moves no circle. For dense
+    /// clouds, such as a fused map's cells, whose points are a cell apart: a polygon of the last
+    /// points lies a cell inside the true edge. 0 (the default, the paper's polygons, and every
+    /// single scan, whose points lie 0.3-2.4 m apart) turns it off. Not a
+    /// `landing.v1.PipelineOptions` field: the service sets it for fused streams.
+    pub midpoint_max_edge_m: f64,
 }
 
 impl Default for Params {
@@ -111,6 +119,7 @@ impl Default for Params {
             min_hole_area_m2: 0.0,
             max_sites: 16,
             close_pinholes: false,
+            midpoint_max_edge_m: 0.0,
         }
     }
 }
@@ -166,6 +175,7 @@ impl Params {
         finite_non_negative("min_safe_radius_m", self.min_safe_radius_m)?;
         finite_non_negative("min_area_m2", self.min_area_m2)?;
         finite_non_negative("min_hole_area_m2", self.min_hole_area_m2)?;
+        finite_non_negative("midpoint_max_edge_m", self.midpoint_max_edge_m)?;
         if self.max_sites == 0 {
             return Err(bad("max_sites", self.max_sites, "must be >= 1"));
         }
@@ -413,9 +423,10 @@ fn run(
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 
-    let polygons = boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams {})?;
+    let polygons =
+        boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams::default())?;
     // Where points are flagged, the circles stay in the part of each region without them.
-    let parts = match keep_clear.points {
+    let mut parts = match keep_clear.points {
         Some(flags) if flags.iter().any(|&f| f) => {
             Some(boundary::region_parts(&tri, &pts, &regions, |t| {
                 let t = 3 * t as usize;
@@ -423,6 +434,36 @@ fn run(
             })?)
         }
         _ => None,
+    };
+    let polygons = if params.midpoint_max_edge_m > 0.0 {
+        let grown = boundary::region_polygons(
+            &tri,
+            &pts,
+            &regions,
+            &boundary::BoundaryParams {
+                midpoint_max_edge_m: params.midpoint_max_edge_m,
+            },
+        )?;
+        // The circles stay in the polygons of the regions' own points (or their parts).
+        let mut own: Vec<Option<boundary::Rings>> =
+            parts.unwrap_or_else(|| vec![None; polygons.len()]);
+        for (part, polygon) in own.iter_mut().zip(&polygons) {
+            part.get_or_insert_with(|| {
+                std::iter::once(polygon.shell.clone())
+                    .chain(polygon.holes.iter().cloned())
+                    .collect()
+            });
+        }
+        parts = Some(own);
+        // By construction a grown polygon is valid; should rounding ever make one not, the
+        // region keeps the polygon of its own points.
+        grown
+            .into_iter()
+            .zip(polygons)
+            .map(|(g, p)| if g.validate().is_ok() { g } else { p })
+            .collect()
+    } else {
+        polygons
     };
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;

@@ -420,8 +420,9 @@ mod tests {
 /// finds replay in this crate's tests: 8 bytes pick parameters within the ranges the API
 /// accepts, then 13 bytes a point (f32 x, y, z; a class), at most `max_points` points; points
 /// with a non-finite coordinate or one beyond 1e7 m are skipped, as the service refuses them.
-/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd, and
-/// pinholes are closed when the 8th is.
+/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd,
+/// pinholes are closed when the 8th is, and polygons end at midpoints when the 8th byte's
+/// second bit is set (its top six bits give the limit, up to 5 m).
 pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
     let (head, body) = data.split_first_chunk::<8>()?;
     let unit = |b: u8| f64::from(b) / 255.0;
@@ -433,6 +434,11 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         min_region_triangles: usize::from(head[4] % 16),
         max_sites: usize::from(head[5] % 8) + 1,
         close_pinholes: head[7] & 1 == 1,
+        midpoint_max_edge_m: if head[7] & 2 == 2 {
+            0.05 + f64::from(head[7] >> 2) / 63.0 * 5.0
+        } else {
+            0.0
+        },
         ..crate::Params::default()
     };
     let mut points = Vec::new();

@@ -743,3 +743,153 @@ fn property_dense_noisy_roofs_lose_their_pinholes_not_their_obstacles() {
     }
     assert!(pinholes_left_open > 0, "the scenes have pinholes to close");
 }
+
+/// A lone obstacle point in a lattice roof: its hole is the hexagon of its six neighbours, the
+/// triangles that touch it. With midpoint edges the hole runs through the midpoints between the
+/// obstacle and each neighbour instead (the two detours of each pair of neighbouring triangles
+/// meet there), and the safe circle does not move.
+#[test]
+fn an_obstacle_hole_ends_halfway_to_the_obstacle_and_the_circle_stays() {
+    let (pts, classes) = lattice(12, 12, &[(5, 5)]);
+    let plain = run(&pts, Some(&classes), &Params::default());
+    let grown = run(
+        &pts,
+        Some(&classes),
+        &Params {
+            midpoint_max_edge_m: 1.5,
+            ..Params::default()
+        },
+    );
+    assert_eq!(plain.sites.len(), 1);
+    assert_eq!(grown.sites.len(), 1);
+    let (p, g) = (&plain.sites[0], &grown.sites[0]);
+    assert_eq!((p.center, p.safe_radius_m), (g.center, g.safe_radius_m));
+    // The lattice's hull has no triangle outside it: the shell stays.
+    assert_eq!(p.polygon.shell, g.polygon.shell);
+    assert_eq!(p.polygon.holes[0].len(), 6);
+    assert_eq!(g.polygon.holes.len(), 1);
+    let hole = &g.polygon.holes[0];
+    assert_eq!(hole.len(), 6, "{hole:?}");
+    let o = lattice_xy(5, 5);
+    for v in hole {
+        let d = (v[0] - o[0]).hypot(v[1] - o[1]);
+        assert!((d - 0.5).abs() < 1e-6, "{v:?} is {d} m from the obstacle");
+    }
+    // The hexagon of side 1 becomes the hexagon of side 0.5: a quarter of its area.
+    let hexagon = 3.0 * 3f64.sqrt() / 2.0;
+    assert!((g.area_m2 - (p.area_m2 + 0.75 * hexagon)).abs() < 1e-4);
+    // Beyond the limit nothing moves.
+    let short = run(
+        &pts,
+        Some(&classes),
+        &Params {
+            midpoint_max_edge_m: 0.9,
+            ..Params::default()
+        },
+    );
+    assert_eq!(short.sites[0].polygon, p.polygon);
+}
+
+/// Dense, noisy roofs with obstacles and walls, as a fused map's cells are: with midpoint edges
+/// every site keeps its circle, its polygon stays valid and holds the polygon of its own points,
+/// reaches at most half the limit beyond it, and holds no obstacle point. Without them the
+/// polygons are smaller (so the test can fail).
+#[test]
+fn property_midpoint_edges_grow_polygons_not_circles() {
+    let mut g = Pcg32::new(91);
+    let max_edge = 0.5;
+    let base = Params {
+        close_pinholes: true,
+        ..Params::default()
+    };
+    let midpoints = Params {
+        midpoint_max_edge_m: max_edge,
+        ..base.clone()
+    };
+    let mut grown_by = 0.0;
+    for case in 0..6u64 {
+        let params = SceneParams {
+            point_count: 10_000,
+            roof_size_m: [12.0, 12.0],
+            roof_height_m: g.range(3.0, 40.0),
+            obstacles: 1 + (g.next_u32() % 4) as usize,
+            noise_m: 0.01,
+            ..SceneParams::default()
+        };
+        let s = Scene::generate(&params, case);
+        let xy = |i: usize| [f64::from(s.points[i][0]), f64::from(s.points[i][1])];
+        let plain = run(&s.points, Some(&s.classes), &base);
+        let grown = run(&s.points, Some(&s.classes), &midpoints);
+        assert!(!plain.sites.is_empty(), "case {case}");
+        // Every region's grown polygon is valid as built: `detect`'s fallback to the polygon of
+        // the region's own points is never needed here.
+        for (r, polygon) in grown_region_polygons(&s.points, Some(&s.classes), &midpoints)
+            .iter()
+            .enumerate()
+        {
+            polygon
+                .validate()
+                .unwrap_or_else(|e| panic!("case {case}, region {r}: {e}"));
+        }
+        assert_eq!(plain.sites.len(), grown.sites.len(), "case {case}");
+        for (p, q) in plain.sites.iter().zip(&grown.sites) {
+            assert_eq!(
+                (p.center, p.safe_radius_m),
+                (q.center, q.safe_radius_m),
+                "case {case}"
+            );
+            for v in p
+                .polygon
+                .shell
+                .iter()
+                .chain(p.polygon.holes.iter().flatten())
+            {
+                assert!(
+                    q.polygon.signed_distance(*v) > -1e-9,
+                    "case {case}: {v:?} left out"
+                );
+            }
+            for v in q
+                .polygon
+                .shell
+                .iter()
+                .chain(q.polygon.holes.iter().flatten())
+            {
+                assert!(
+                    p.polygon.signed_distance(*v) > -max_edge / 2.0 - 1e-9,
+                    "case {case}: {v:?} reaches too far"
+                );
+            }
+            for i in s.obstacle_points() {
+                assert!(!strictly_inside(&q.polygon, xy(i)), "case {case}");
+            }
+            assert!(q.area_m2 >= p.area_m2, "case {case}");
+            grown_by += q.area_m2 - p.area_m2;
+        }
+    }
+    assert!(grown_by > 1.0, "the polygons grew by {grown_by} m²");
+}
+
+/// The steps of `detect` up to the polygons, with `params`' midpoint edges.
+fn grown_region_polygons(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    params: &Params,
+) -> Vec<Polygon> {
+    use landing_geometry::{boundary, filter, regions, triangulation};
+    let pts: Vec<[f64; 3]> = points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+        .collect();
+    let tri = triangulation::triangulate(&pts, &TriangulationConfig::default()).unwrap();
+    let keep = filter::filter_triangles(&tri, &pts, classes, &filter::FilterParams::from(params));
+    let region_params = regions::RegionParams {
+        min_triangles: params.min_region_triangles,
+    };
+    let mut regions = regions::extract_regions(&tri, &pts, keep, &region_params).unwrap();
+    regions::close_pinholes(&tri, &pts, &mut regions, params.l_max_m, params.z_min_m);
+    let grow = boundary::BoundaryParams {
+        midpoint_max_edge_m: params.midpoint_max_edge_m,
+    };
+    boundary::region_polygons(&tri, &pts, &regions, &grow).unwrap()
+}

@@ -228,7 +228,8 @@ pub fn run_pipeline(
 /// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
 /// stream's `map`, and the answer is computed from all the map's points (what the approach has
 /// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers,
-/// with the pinholes of its dense planes closed (`Params::close_pinholes`).
+/// with the pinholes of its dense planes closed (`Params::close_pinholes`) and its polygons'
+/// edges halfway to the first point that is not theirs (`Params::midpoint_max_edge_m`).
 /// `reset` starts the map over first. A frame without a timestamp counts as taken at the
 /// previous frame's time. The frame-local coordinates are the map's own (its origin), so that
 /// the keep-out footprints of every kept frame share them.
@@ -319,9 +320,12 @@ pub fn run_fused(
         reset: reset.map(|r| r.to_string()),
         keep_out_frames: keep_out.len(),
     };
-    // The map's cells are dense: range noise punches pinholes into its planes.
+    // The map's cells are dense: range noise punches pinholes into its planes, and a polygon of
+    // its last landable cells ends a cell inside the edge, so it ends halfway to the first cell
+    // that is not landable, where that is a cell or two away (the circles stay as they were).
     let params = Params {
         close_pinholes: true,
+        midpoint_max_edge_m: 2.0 * map.params().cell_m,
         ..options.params.clone()
     };
     let located = Located {
@@ -705,5 +709,55 @@ mod tests {
         let fused = run_fused(&f, &options, &pipeline, &mut map, false).unwrap();
         assert_eq!(fused.sites.len(), 1);
         assert_eq!(holes(&fused), 0);
+    }
+
+    #[test]
+    fn a_fused_answer_ends_its_polygons_halfway_to_the_first_obstacle_point() {
+        // A 12 m roof of points 0.2 m apart (no two in one map cell), 20 m below the LiDAR, with
+        // an AC unit's points over 1 m² in the middle: the hole around it ends at the last roof
+        // points judged alone, halfway to the unit's points fused.
+        let mut points = Vec::new();
+        let mut classes = Vec::new();
+        for y in 0..60 {
+            for x in 0..60 {
+                let at = |i: i32| 0.2 * f64::from(i) - 6.0 + 0.001 * f64::from((i * 7) % 5);
+                points.push([at(x), at(y), -20.0]);
+                let unit = (28..=33).contains(&x) && (28..=33).contains(&y);
+                classes.push(if unit {
+                    landing_geometry::SemanticClass::AcUnit as u8
+                } else {
+                    landing_geometry::SemanticClass::BuildingRooftop as u8
+                });
+            }
+        }
+        let f = frame(points, Some(classes));
+        let (options, pipeline) = (FrameOptions::default(), Pipeline::default());
+        let hole_area = |out: &FrameOutput| {
+            assert_eq!(out.sites.len(), 1);
+            assert_eq!(out.sites[0].holes.len(), 1);
+            let h = &out.sites[0].holes[0];
+            (0..h.len())
+                .map(|i| {
+                    let (a, b) = (h[i], h[(i + 1) % h.len()]);
+                    a[0] * b[1] - b[0] * a[1]
+                })
+                .sum::<f64>()
+                .abs()
+                / 2.0
+        };
+        let alone = run_pipeline(&f, &options, &pipeline).unwrap();
+        let params = landing_fusion::FusionParams {
+            max_footprint_m: 0.0,
+            ..crate::Config::default().fusion.params()
+        };
+        let mut map = StreamMap::new(params).unwrap();
+        let fused = run_fused(&f, &options, &pipeline, &mut map, false).unwrap();
+        // The unit's points span 1.0 m, the last roof points around it 1.4 m (a square less the
+        // corners the triangles cut). Fused, the hole runs through the midpoints of the edges
+        // from the roof points to the unit's: through 1.2 m where a triangle has two roof
+        // corners, saw-toothed out to the unit's points where it has one.
+        let (a, b) = (hole_area(&alone), hole_area(&fused));
+        assert!(a > 1.8 && a <= 1.4 * 1.4, "judged alone: {a} m²");
+        assert!(b >= 1.2 * 1.2 && b < a - 0.3, "fused: {b} m²");
     }
 }
