@@ -368,7 +368,10 @@ pub struct StreamConfig {
     /// Approach fusion: each answer comes from the server's map of the stream's frames so far
     /// (sent with the first frame; `None` judges every frame alone). The map lives in the server
     /// process that holds the stream: when the stream breaks and the drone reconnects, possibly
-    /// to another replica after a drain, fusion starts over from the next frame.
+    /// to another replica after a drain, fusion starts over from the next frame. A fused
+    /// answer's polygons end halfway between the map's last landable points and the first points
+    /// that are not; each safe circle stays within the landable points, so it may lie farther
+    /// from its polygon's edge than its radius.
     pub fusion: Option<FusionOptions>,
 }
 
