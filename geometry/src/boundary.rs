@@ -39,8 +39,48 @@ pub fn region_polygons(
     regions: &Regions,
     params: &BoundaryParams,
 ) -> Result<Vec<Polygon>, GeometryError> {
+    traced(tri, points, regions, params.midpoint_max_edge_m).map(|v| {
+        v.into_iter()
+            .map(|(own, grown)| grown.unwrap_or(own))
+            .collect()
+    })
+}
+
+/// Each region's polygon of its own points and the same polygon through midpoints
+/// ([`BoundaryParams::midpoint_max_edge_m`] = `midpoint_max_edge_m`), from one walk of its
+/// boundary: [`region_polygons`] without and with midpoints.
+pub fn region_polygons_with_midpoints(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    regions: &Regions,
+    midpoint_max_edge_m: f64,
+) -> Result<Vec<(Polygon, Polygon)>, GeometryError> {
+    traced(
+        tri,
+        points,
+        regions,
+        midpoint_max_edge_m.max(f64::MIN_POSITIVE),
+    )
+    .map(|v| {
+        v.into_iter()
+            .map(|(own, grown)| {
+                let grown = grown.unwrap_or_else(|| own.clone());
+                (own, grown)
+            })
+            .collect()
+    })
+}
+
+/// Each region's polygon of its own points, and through midpoints when `midpoint_max_edge_m`
+/// is positive.
+fn traced(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    regions: &Regions,
+    midpoint_max_edge_m: f64,
+) -> Result<Vec<(Polygon, Option<Polygon>)>, GeometryError> {
     let mut scratch = Scratch::for_points(points.len());
-    let grow = params.midpoint_max_edge_m > 0.0;
+    let grow = midpoint_max_edge_m > 0.0;
     if grow {
         scratch.member.resize(points.len(), false);
     }
@@ -51,7 +91,7 @@ pub fn region_polygons(
         .map(|(r, region)| {
             let midpoints = grow.then_some(Midpoints {
                 labels: &regions.labels,
-                max_edge_m: params.midpoint_max_edge_m,
+                max_edge_m: midpoint_max_edge_m,
             });
             region_polygon(
                 tri,
@@ -175,9 +215,19 @@ fn region_polygon(
     triangles: &[u32],
     midpoints: Option<Midpoints<'_>>,
     s: &mut Scratch,
-) -> Result<Polygon, GeometryError> {
+) -> Result<(Polygon, Option<Polygon>), GeometryError> {
     let inside = |t: usize| labels[t] == label;
     let loops = boundary_loops(tri, points, triangles.iter().copied(), inside, s)?;
+    let own = polygon_of(
+        loops
+            .iter()
+            .map(|l| ring_of(tri, points, l, None, s))
+            .collect(),
+        label,
+    )?;
+    let Some(midpoints) = midpoints else {
+        return Ok((own, None));
+    };
     let mark = |member: &mut [bool], on: bool| {
         for &t in triangles {
             for &v in &tri.triangles[3 * t as usize..3 * t as usize + 3] {
@@ -185,16 +235,18 @@ fn region_polygon(
             }
         }
     };
-    if midpoints.is_some() {
-        mark(&mut s.member, true);
-    }
-    let rings: Rings = loops
+    mark(&mut s.member, true);
+    let rings = loops
         .iter()
-        .map(|l| ring_of(tri, points, l, midpoints.as_ref(), s))
+        .map(|l| ring_of(tri, points, l, Some(&midpoints), s))
         .collect();
-    if midpoints.is_some() {
-        mark(&mut s.member, false);
-    }
+    mark(&mut s.member, false);
+    Ok((own, Some(polygon_of(rings, label)?)))
+}
+
+/// A region's rings as a polygon: the counter-clockwise one its shell, the others its holes,
+/// sorted by their vertices.
+fn polygon_of(rings: Rings, label: u32) -> Result<Polygon, GeometryError> {
     let mut shell = None;
     let mut holes = Vec::new();
     for ring in rings {
@@ -337,13 +389,13 @@ fn trace_loops(
         let p = points[v as usize];
         [p[0], p[1]]
     };
-    let mut rings = Vec::new();
+    let mut loops = Vec::new();
     let mut steps = 0usize;
     for start in 0..m {
         if s.used[start] {
             continue;
         }
-        let mut ring = Vec::new();
+        let mut edges = Vec::new();
         let mut cur = start;
         loop {
             steps += 1;
@@ -357,7 +409,7 @@ fn trace_loops(
             let e = s.edges[cur] as usize;
             let a = tri.triangles[e];
             let b = tri.triangles[next_halfedge(e)];
-            ring.push(e as u32);
+            edges.push(e as u32);
             // Candidates: the unused outgoing boundary edges at b, and the ring's first edge.
             let mut best = EMPTY;
             let mut c = s.head[b as usize];
@@ -396,9 +448,9 @@ fn trace_loops(
             }
             cur = best as usize;
         }
-        rings.push(ring);
+        loops.push(edges);
     }
-    Ok(rings)
+    Ok(loops)
 }
 
 /// Lexicographic order of points.

@@ -423,8 +423,24 @@ fn run(
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 
-    let polygons =
-        boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams::default())?;
+    // With midpoint edges, each region has two polygons from one walk of its boundary: the one
+    // of its own points, which the safe circle stays in, and the grown one, which is returned.
+    let (polygons, grown) = if params.midpoint_max_edge_m > 0.0 {
+        let pairs = boundary::region_polygons_with_midpoints(
+            &tri,
+            &pts,
+            &regions,
+            params.midpoint_max_edge_m,
+        )?;
+        let (own, grown): (Vec<Polygon>, Vec<Polygon>) = pairs.into_iter().unzip();
+        (own, Some(grown))
+    } else {
+        let params = boundary::BoundaryParams::default();
+        (
+            boundary::region_polygons(&tri, &pts, &regions, &params)?,
+            None,
+        )
+    };
     // Where points are flagged, the circles stay in the part of each region without them.
     let mut parts = match keep_clear.points {
         Some(flags) if flags.iter().any(|&f| f) => {
@@ -435,35 +451,28 @@ fn run(
         }
         _ => None,
     };
-    let polygons = if params.midpoint_max_edge_m > 0.0 {
-        let grown = boundary::region_polygons(
-            &tri,
-            &pts,
-            &regions,
-            &boundary::BoundaryParams {
-                midpoint_max_edge_m: params.midpoint_max_edge_m,
-            },
-        )?;
-        // The circles stay in the polygons of the regions' own points (or their parts).
-        let mut own: Vec<Option<boundary::Rings>> =
-            parts.unwrap_or_else(|| vec![None; polygons.len()]);
-        for (part, polygon) in own.iter_mut().zip(&polygons) {
-            part.get_or_insert_with(|| {
-                std::iter::once(polygon.shell.clone())
-                    .chain(polygon.holes.iter().cloned())
-                    .collect()
-            });
+    let polygons = match grown {
+        Some(grown) => {
+            // The circles stay in the polygons of the regions' own points (or their parts).
+            let mut own: Vec<Option<boundary::Rings>> =
+                parts.unwrap_or_else(|| vec![None; polygons.len()]);
+            for (part, polygon) in own.iter_mut().zip(&polygons) {
+                part.get_or_insert_with(|| {
+                    std::iter::once(polygon.shell.clone())
+                        .chain(polygon.holes.iter().cloned())
+                        .collect()
+                });
+            }
+            parts = Some(own);
+            // By construction a grown polygon is valid; should rounding ever make one not, the
+            // region keeps the polygon of its own points.
+            grown
+                .into_iter()
+                .zip(polygons)
+                .map(|(g, p)| if g.validate().is_ok() { g } else { p })
+                .collect()
         }
-        parts = Some(own);
-        // By construction a grown polygon is valid; should rounding ever make one not, the
-        // region keeps the polygon of its own points.
-        grown
-            .into_iter()
-            .zip(polygons)
-            .map(|(g, p)| if g.validate().is_ok() { g } else { p })
-            .collect()
-    } else {
-        polygons
+        None => polygons,
     };
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;

@@ -735,15 +735,8 @@ mod tests {
         let hole_area = |out: &FrameOutput| {
             assert_eq!(out.sites.len(), 1);
             assert_eq!(out.sites[0].holes.len(), 1);
-            let h = &out.sites[0].holes[0];
-            (0..h.len())
-                .map(|i| {
-                    let (a, b) = (h[i], h[(i + 1) % h.len()]);
-                    a[0] * b[1] - b[0] * a[1]
-                })
-                .sum::<f64>()
-                .abs()
-                / 2.0
+            let hole: Vec<[f64; 2]> = out.sites[0].holes[0].iter().map(|p| [p[0], p[1]]).collect();
+            landing_geometry::validation::ring_signed_area(&hole).abs()
         };
         let alone = run_pipeline(&f, &options, &pipeline).unwrap();
         let params = landing_fusion::FusionParams {
