@@ -15,7 +15,10 @@ use landing_geometry::ranking::{RankingParams, rank_sites};
 use landing_geometry::regions::{RegionParams, extract_regions};
 use landing_geometry::synthetic::{Scene, SceneParams};
 use landing_geometry::triangulation::triangulate;
-use landing_geometry::{Params, StepTimings, TriangulationConfig, Triangulator, detect};
+use landing_geometry::{
+    Disk, KeepClear, Params, StepTimings, TriangulationConfig, Triangulator, detect,
+    detect_keeping_out,
+};
 
 const SIZES: [(usize, &str); 4] = [
     (1_500, "1.5k"),
@@ -148,6 +151,38 @@ fn benches(c: &mut Criterion) {
                 rank_sites(black_box(&regions), polygons.clone(), None, &ranking, None).unwrap()
             })
         });
+        // Keep-out disks of 0.2 m at every 50th point: every one bounding the circles, or only
+        // those over the regions' long-edged triangles (a fused map's setting: two cells, here
+        // two point spacings).
+        let disks: Vec<Disk> = s
+            .points
+            .iter()
+            .step_by(50)
+            .map(|p| Disk {
+                center: [f64::from(p[0]), f64::from(p[1])],
+                radius: 0.2,
+            })
+            .collect();
+        let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
+        for (name, trust) in [
+            ("detect_keep_out", 0.0),
+            ("detect_keep_out_trusted", 2.0 * s.spacing_m),
+        ] {
+            let params = Params {
+                keep_out_trust_edge_m: trust,
+                ..Params::default()
+            };
+            let keep_clear = KeepClear {
+                disks: Some(&keep_out),
+                points: None,
+            };
+            g.bench_function(BenchmarkId::new(name, label), |b| {
+                b.iter(|| {
+                    detect_keeping_out(black_box(&s.points), Some(&s.classes), &params, keep_clear)
+                        .unwrap()
+                })
+            });
+        }
         g.finish();
     }
 }

@@ -42,6 +42,7 @@ pub mod ranking;
 pub mod regions;
 pub mod synthetic;
 pub mod triangulation;
+mod trust;
 pub mod validation;
 
 use std::time::{Duration, Instant};
@@ -103,6 +104,13 @@ pub struct Params {
     /// single scan, whose points lie 0.3-2.4 m apart) turns it off. Not a
     /// `landing.v1.PipelineOptions` field: the service sets it for fused streams.
     pub midpoint_max_edge_m: f64,
+    /// Keep-out disks bound a safe circle only where they meet one of the regions' triangles
+    /// with an x/y edge longer than this: where the points lie closer together, they show the
+    /// ground themselves (an obstacle that no point hit leaves a longer edge; see the `trust`
+    /// module). For dense clouds, such as a fused map's cells. 0 (the default, and every single
+    /// scan) keeps every disk. Not a `landing.v1.PipelineOptions` field: the service sets it for
+    /// fused streams.
+    pub keep_out_trust_edge_m: f64,
 }
 
 impl Default for Params {
@@ -120,6 +128,7 @@ impl Default for Params {
             max_sites: 16,
             close_pinholes: false,
             midpoint_max_edge_m: 0.0,
+            keep_out_trust_edge_m: 0.0,
         }
     }
 }
@@ -176,6 +185,7 @@ impl Params {
         finite_non_negative("min_area_m2", self.min_area_m2)?;
         finite_non_negative("min_hole_area_m2", self.min_hole_area_m2)?;
         finite_non_negative("midpoint_max_edge_m", self.midpoint_max_edge_m)?;
+        finite_non_negative("keep_out_trust_edge_m", self.keep_out_trust_edge_m)?;
         if self.max_sites == 0 {
             return Err(bad("max_sites", self.max_sites, "must be >= 1"));
         }
@@ -477,12 +487,23 @@ fn run(
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
+    // Where the regions' points are dense, they answer for the ground: disks there bound nothing.
+    let gaps;
+    let over_gaps;
+    let disks = match keep_clear.disks {
+        Some(inner) if params.keep_out_trust_edge_m > 0.0 => {
+            gaps = trust::Gaps::new(&tri, &pts, &regions, params.keep_out_trust_edge_m);
+            over_gaps = trust::OverGaps { inner, gaps: &gaps };
+            Some(&over_gaps as &dyn ranking::KeepOut)
+        }
+        other => other,
+    };
     let sites = ranking::rank_sites(
         &regions,
         polygons,
         parts.as_deref(),
         &ranking::RankingParams::from(params),
-        keep_clear.disks,
+        disks,
     )?;
     timings.polylabel = t4.elapsed();
 

@@ -422,7 +422,9 @@ mod tests {
 /// with a non-finite coordinate or one beyond 1e7 m are skipped, as the service refuses them.
 /// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd,
 /// pinholes are closed when the 8th is, and polygons end at midpoints when the 8th byte's
-/// second bit is set (its top six bits give the limit, up to 5 m).
+/// second bit is set (its top six bits give the limit, up to 5 m). When the 7th byte's second
+/// bit is set, the first 8 points also stand for keep-out disks (radius from the class byte, up
+/// to 2 m) and its top six bits give `keep_out_trust_edge_m` (0 to 5 m).
 pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
     let (head, body) = data.split_first_chunk::<8>()?;
     let unit = |b: u8| f64::from(b) / 255.0;
@@ -439,20 +441,33 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         } else {
             0.0
         },
+        keep_out_trust_edge_m: if head[6] & 2 == 2 {
+            f64::from(head[6] >> 2) / 63.0 * 5.0
+        } else {
+            0.0
+        },
         ..crate::Params::default()
     };
     let mut points = Vec::new();
     let mut classes = Vec::new();
+    let mut disks = Vec::new();
     for chunk in body.chunks_exact(13).take(max_points) {
         let v = |i: usize| f32::from_le_bytes([chunk[i], chunk[i + 1], chunk[i + 2], chunk[i + 3]]);
         let p = [v(0), v(4), v(8)];
         if p.iter().all(|c| c.is_finite() && c.abs() <= 1.0e7) {
             points.push(p);
             classes.push(chunk[12] % 15);
+            if head[6] & 2 == 2 && disks.len() < 8 {
+                disks.push(crate::Disk {
+                    center: [f64::from(p[0]), f64::from(p[1])],
+                    radius: unit(chunk[12]) * 2.0,
+                });
+            }
         }
     }
     Some(DetectInput {
         points,
+        disks,
         classes: (head[6] & 1 == 1).then_some(classes),
         params,
     })
@@ -462,6 +477,8 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectInput {
     pub points: Vec<[f32; 3]>,
+    /// Keep-out disks for every plane ([`crate::detect_keeping_out`]); none for [`crate::detect`].
+    pub disks: Vec<crate::Disk>,
     pub classes: Option<Vec<u8>>,
     pub params: crate::Params,
 }

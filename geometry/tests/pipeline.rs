@@ -534,6 +534,78 @@ fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
 }
 
 #[test]
+fn keep_out_disks_bound_circles_only_over_gaps_in_dense_points() {
+    // A flat roof on a unit lattice (edges 1 m), with a gap of radius 1.6 m where an obstacle
+    // stands that no point hit: the triangles across it have edges over 2 m.
+    let (cols, rows) = (21, 24);
+    let (full_pts, full_classes) = lattice(cols, rows, &[]);
+    let gap = lattice_xy(6, 12);
+    let keep: Vec<bool> = (0..full_pts.len())
+        .map(|k| {
+            let v = lattice_xy(k % cols, k / cols);
+            (v[0] - gap[0]).hypot(v[1] - gap[1]) > 1.6
+        })
+        .collect();
+    let pick = |all: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        all.iter()
+            .zip(&keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p)
+            .collect()
+    };
+    let pts = pick(&full_pts);
+    let classes: Vec<u8> = full_classes
+        .iter()
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .map(|(c, _)| *c)
+        .collect();
+    // The camera saw the obstacle in the gap, and something at the centre of dense points.
+    let in_gap = Disk {
+        center: gap,
+        radius: 0.8,
+    };
+    let plain = run(&pts, Some(&classes), &Params::default());
+    let c = plain.sites[0].center;
+    let on_points = Disk {
+        center: [c[0], c[1]],
+        radius: 0.5,
+    };
+    let with = |disks: Vec<Disk>, trust: f64| {
+        let keep_out = move |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
+        let keep_clear = KeepClear {
+            disks: Some(&keep_out),
+            points: None,
+        };
+        let params = Params {
+            keep_out_trust_edge_m: trust,
+            ..Params::default()
+        };
+        let d = detect_keeping_out(&pts, Some(&classes), &params, keep_clear).expect("detect");
+        check_detection(&d).expect("valid detection");
+        d
+    };
+    let clear_of = |d: &Detection, disk: &Disk| {
+        let s = &d.sites[0];
+        (s.center[0] - disk.center[0]).hypot(s.center[1] - disk.center[1]) - disk.radius
+            >= s.safe_radius_m - 1e-9
+    };
+    // Every disk counts by default: the circle leaves the centre.
+    let every = with(vec![in_gap, on_points], 0.0);
+    assert!(clear_of(&every, &on_points) && clear_of(&every, &in_gap));
+    assert!(every.sites[0].safe_radius_m < plain.sites[0].safe_radius_m);
+    // Trusting edges of up to 1.5 m, the disk on dense points bounds nothing; the one in the gap
+    // still does.
+    let trusted = with(vec![in_gap, on_points], 1.5);
+    assert_eq!(trusted.sites, with(vec![in_gap], 0.0).sites);
+    assert!(clear_of(&trusted, &in_gap));
+    assert!(trusted.sites[0].safe_radius_m > every.sites[0].safe_radius_m);
+    // Trusting edges as long as the gap's, no disk bounds anything: the limit must stay below
+    // the gaps an obstacle leaves.
+    assert_eq!(with(vec![in_gap, on_points], 4.0).sites, plain.sites);
+}
+
+#[test]
 fn safe_circles_keep_off_the_triangles_of_flagged_points() {
     // A flat roof of about 20 x 20 m on a unit triangular lattice: each point's triangles cover
     // the disk of the triangles' height around it.
@@ -868,6 +940,122 @@ fn property_midpoint_edges_grow_polygons_not_circles() {
         }
     }
     assert!(grown_by > 1.0, "the polygons grew by {grown_by} m²");
+}
+
+/// Dense, noisy roofs, as a fused map's cells are, where the LiDAR missed one obstacle (no
+/// point on or under it) and a camera saw every obstacle, and also something on open roof that
+/// is not there. With the trust limit `L`, a safe circle reaches at most `L/√3` into the missed
+/// obstacle (deeper, its points lie in a triangle with an edge over `L`, whose disks count), and
+/// the disks on dense points bound nothing, so the circles grow (the test fails without it).
+#[test]
+fn property_keep_out_disks_count_over_gaps_not_over_dense_points() {
+    let mut g = Pcg32::new(17);
+    let (mut every_total, mut trusted_total) = (0.0, 0.0);
+    for case in 0..6u64 {
+        let params = SceneParams {
+            point_count: 10_000,
+            roof_size_m: [12.0, 12.0],
+            roof_height_m: g.range(3.0, 40.0),
+            obstacles: 1 + (g.next_u32() % 3) as usize,
+            noise_m: 0.01,
+            ..SceneParams::default()
+        };
+        let s = Scene::generate(&params, 100 + case);
+        // Two point spacings, as the service's two map cells.
+        let limit = 2.0 * s.spacing_m;
+        let reach = limit / 3f64.sqrt();
+        let missed = &s.truth.obstacles[0];
+        let (points, classes): (Vec<[f32; 3]>, Vec<u8>) = s
+            .points
+            .iter()
+            .zip(&s.classes)
+            .filter(|(p, _)| !missed.contains(f64::from(p[0]), f64::from(p[1])))
+            .map(|(p, c)| (*p, *c))
+            .unzip();
+        // The camera's disks: every obstacle's footprint and 0.2 m around it, and false ones.
+        let mut disks = Vec::new();
+        for o in &s.truth.obstacles {
+            let mut y = o.min[1] - 0.2;
+            while y <= o.max[1] + 0.2 {
+                let mut x = o.min[0] - 0.2;
+                while x <= o.max[0] + 0.2 {
+                    disks.push(Disk {
+                        center: [x, y],
+                        radius: 0.15,
+                    });
+                    x += 0.1;
+                }
+                y += 0.1;
+            }
+        }
+        let roof = &s.truth.roofs[0];
+        for _ in 0..20 {
+            let c = [
+                g.range(roof.min[0], roof.max[0]),
+                g.range(roof.min[1], roof.max[1]),
+            ];
+            if s.truth
+                .obstacles
+                .iter()
+                .all(|o| o.distance(c[0], c[1]) > 1.0)
+            {
+                disks.push(Disk {
+                    center: c,
+                    radius: g.range(0.1, 0.6),
+                });
+            }
+        }
+        let with = |trust: f64| {
+            let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
+            let keep_clear = KeepClear {
+                disks: Some(&keep_out),
+                points: None,
+            };
+            let params = Params {
+                close_pinholes: true,
+                keep_out_trust_edge_m: trust,
+                ..Params::default()
+            };
+            let d =
+                detect_keeping_out(&points, Some(&classes), &params, keep_clear).expect("detect");
+            check_detection(&d).expect("valid detection");
+            d
+        };
+        let every = with(0.0);
+        let trusted = with(limit);
+        assert!(!trusted.sites.is_empty(), "case {case}");
+        for site in &trusted.sites {
+            // How deep the circle reaches into the missed obstacle, on a 1 cm grid.
+            let mut depth: f64 = 0.0;
+            let mut y = missed.min[1];
+            while y <= missed.max[1] {
+                let mut x = missed.min[0];
+                while x <= missed.max[0] {
+                    if (x - site.center[0]).hypot(y - site.center[1]) <= site.safe_radius_m {
+                        let d = (x - missed.min[0])
+                            .min(missed.max[0] - x)
+                            .min(y - missed.min[1])
+                            .min(missed.max[1] - y);
+                        depth = depth.max(d);
+                    }
+                    x += 0.01;
+                }
+                y += 0.01;
+            }
+            assert!(
+                depth <= reach + 0.01,
+                "case {case}: the circle at {:?} of {} m reaches {depth} m into {missed:?}",
+                site.center,
+                site.safe_radius_m
+            );
+        }
+        every_total += every.sites.first().map_or(0.0, |s| s.safe_radius_m);
+        trusted_total += trusted.sites[0].safe_radius_m;
+    }
+    assert!(
+        trusted_total > every_total + 0.5,
+        "{trusted_total} against {every_total} with every disk"
+    );
 }
 
 /// The steps of `detect` up to the polygons, with `params`' midpoint edges.

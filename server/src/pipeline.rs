@@ -323,9 +323,14 @@ pub fn run_fused(
     // The map's cells are dense: range noise punches pinholes into its planes, and a polygon of
     // its last landable cells ends a cell inside the edge, so it ends halfway to the first cell
     // that is not landable, where that is a cell or two away (the circles stay as they were).
+    // Where its landable cells lie within two cells of each other they show the roof itself, and
+    // the keep-out footprints there bound no circle: an obstacle that no scan hit leaves a wider
+    // gap, where they still do.
+    let cells = 2.0 * map.params().cell_m;
     let params = Params {
         close_pinholes: true,
-        midpoint_max_edge_m: 2.0 * map.params().cell_m,
+        midpoint_max_edge_m: cells,
+        keep_out_trust_edge_m: cells,
         ..options.params.clone()
     };
     let located = Located {
@@ -709,6 +714,102 @@ mod tests {
         let fused = run_fused(&f, &options, &pipeline, &mut map, false).unwrap();
         assert_eq!(fused.sites.len(), 1);
         assert_eq!(holes(&fused), 0);
+    }
+
+    #[test]
+    fn a_fused_answer_keeps_clear_of_footprints_only_where_the_map_has_a_gap() {
+        // A 12 m roof of points 0.2 m apart (one a map cell), 20 m below a camera looking
+        // straight down whose pixels span 0.2 m there, and which sees an AC unit of 1.2 x 1.2 m
+        // in the middle (a true label image): the best circles sit in a corner and touch it.
+        let unit = |x: f64, y: f64| x.abs() <= 0.6 && y.abs() <= 0.6;
+        let (side, f) = (120u32, 100.0);
+        let mut data = vec![landing_geometry::SemanticClass::BuildingRooftop as u8; 120 * 120];
+        for v in 0..side {
+            for u in 0..side {
+                // The pixel's centre on the roof (the camera's x right, y down, looking down).
+                let x = (f64::from(u) + 0.5 - 60.0) / f * 20.0;
+                let y = -(f64::from(v) + 0.5 - 60.0) / f * 20.0;
+                if unit(x, y) {
+                    data[(v * side + u) as usize] = landing_geometry::SemanticClass::AcUnit as u8;
+                }
+            }
+        }
+        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let labels = CameraImage {
+            pixels: ImagePixels::Mono8 {
+                width: side,
+                height: side,
+                step: side,
+                data,
+            },
+            pose: Isometry3::from_parts(Vector3::zeros().into(), down),
+            intrinsics: Intrinsics {
+                width: side,
+                height: side,
+                fx: f,
+                fy: f,
+                cx: 60.0,
+                cy: 60.0,
+            },
+        };
+        let roof = |missed: bool| {
+            let mut points = Vec::new();
+            for y in 0..60 {
+                for x in 0..60 {
+                    let at = |i: i32| 0.2 * f64::from(i) - 5.9 + 0.001 * f64::from((i * 7) % 5);
+                    let (px, py) = (at(x), at(y));
+                    if !(missed && unit(px, py)) {
+                        points.push([px, py, -20.0]);
+                    }
+                }
+            }
+            Frame {
+                class_image: Some(labels.clone()),
+                ..frame(points, None)
+            }
+        };
+        // A fine polylabel search, so that the circles show a tenth of a metre.
+        let options = FrameOptions {
+            segmentation_mode: SegmentationMode::ClassImage,
+            params: Params {
+                polylabel_precision_m: 0.01,
+                ..Params::default()
+            },
+        };
+        let pipeline = Pipeline::default();
+        let fused = |f: &Frame| {
+            let params = landing_fusion::FusionParams {
+                max_footprint_m: 0.0,
+                ..crate::Config::default().fusion.params()
+            };
+            let mut map = StreamMap::new(params).unwrap();
+            run_fused(f, &options, &pipeline, &mut map, false).unwrap()
+        };
+        // How deep a circle reaches into the unit's footprint.
+        let depth = |s: &Site| {
+            let (dx, dy) = (s.center[0].abs() - 0.6, s.center[1].abs() - 0.6);
+            let outside = dx.max(0.0).hypot(dy.max(0.0)) + dx.max(dy).min(0.0);
+            (s.safe_radius_m - outside).max(0.0)
+        };
+        // The scan hit the unit (its points are labelled so and make a hole): judged alone, the
+        // circle keeps clear of the camera's footprints around the hole too; fused, the map's
+        // dense roof points show the ground there, and only the hole bounds it.
+        let hit = roof(false);
+        let alone = run_pipeline(&hit, &options, &pipeline).unwrap();
+        let together = fused(&hit);
+        let (a, b) = (&alone.sites[0], &together.sites[0]);
+        let (ra, rb) = (a.safe_radius_m, b.safe_radius_m);
+        assert!(rb > ra + 0.05, "judged alone {ra} m, fused {rb} m");
+        // (The hole's corners are cut by the triangles past the unit's corners: by millimetres.)
+        assert!(depth(b) < 0.01, "{} m into the unit", depth(b));
+        // The scan missed it (no point on or under it): the footprints over the gap still count.
+        let missed = fused(&roof(true));
+        let c = &missed.sites[0];
+        assert!(
+            depth(c) <= 0.3 / 3f64.sqrt(),
+            "{} m into the unit",
+            depth(c)
+        );
     }
 
     #[test]

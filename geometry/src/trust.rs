@@ -1,0 +1,228 @@
+//! Where a dense region's own points answer for the ground, and keep-out disks are not needed.
+//!
+//! Keep-out disks ([`crate::ranking::KeepOut`]) stand for obstacles that the points missed: a
+//! camera saw an obstacle along a ray, and no point of it made a hole in the region. Where an
+//! obstacle stands that no point hit, the points leave a gap: an empty disk of radius ρ in the
+//! region puts its centre in a Delaunay triangle whose vertices all lie at least ρ from it, so
+//! that triangle has an edge of at least ρ√3. Where every edge of a region's triangles is short
+//! (a fused map's cells, a cell or two apart), the points themselves show the ground, and an
+//! obstacle the LiDAR hit is a hole of its own points. A disk that meets none of the regions'
+//! long-edged triangles covers only that shown ground, and bounds no safe circle
+//! ([`crate::Params::keep_out_trust_edge_m`]).
+
+use crate::polylabel::Disk;
+use crate::ranking::KeepOut;
+use crate::regions::Regions;
+use crate::triangulation::Triangulation;
+
+/// Most grid cells; a wider spread of points gets coarser cells.
+const MAX_CELLS: f64 = 1.0e6;
+
+/// The regions' triangles with an x/y edge longer than a limit, binned on a grid by their
+/// bounding boxes.
+#[derive(Debug)]
+pub(crate) struct Gaps {
+    origin: [f64; 2],
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    /// Cell `c`'s triangles are `bins[start[c]..start[c + 1]]`, indices into `triangles`.
+    start: Vec<u32>,
+    bins: Vec<u32>,
+    triangles: Vec<[[f64; 2]; 3]>,
+    /// Each triangle's box: min x, min y, max x, max y.
+    boxes: Vec<[f64; 4]>,
+}
+
+impl Gaps {
+    /// The long-edged triangles of every region of `tri` (cells of `limit`, or coarser).
+    pub(crate) fn new(
+        tri: &Triangulation,
+        points: &[[f64; 3]],
+        regions: &Regions,
+        limit: f64,
+    ) -> Self {
+        let long = |c: &[[f64; 2]; 3]| {
+            (0..3).any(|i| {
+                let (a, b) = (c[i], c[(i + 1) % 3]);
+                (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) > limit * limit
+            })
+        };
+        let triangles: Vec<[[f64; 2]; 3]> = (regions.regions.iter())
+            .flat_map(|r| &r.triangles)
+            .map(|&t| {
+                let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
+                std::array::from_fn(|i| {
+                    let p = points[v[i] as usize];
+                    [p[0], p[1]]
+                })
+            })
+            .filter(long)
+            .collect();
+        let boxes: Vec<[f64; 4]> = (triangles.iter())
+            .map(|c| {
+                let [x, y] = [0, 1].map(|k| c.map(|p| p[k]));
+                let min = |v: [f64; 3]| v[0].min(v[1]).min(v[2]);
+                let max = |v: [f64; 3]| v[0].max(v[1]).max(v[2]);
+                [min(x), min(y), max(x), max(y)]
+            })
+            .collect();
+        let mut lo = [f64::INFINITY; 2];
+        let mut hi = [f64::NEG_INFINITY; 2];
+        for b in &boxes {
+            lo = [lo[0].min(b[0]), lo[1].min(b[1])];
+            hi = [hi[0].max(b[2]), hi[1].max(b[3])];
+        }
+        let mut gaps = Self {
+            origin: lo,
+            cell: limit,
+            nx: 0,
+            ny: 0,
+            start: vec![0],
+            bins: Vec::new(),
+            triangles: Vec::new(),
+            boxes: Vec::new(),
+        };
+        if triangles.is_empty() {
+            return gaps;
+        }
+        let span = [hi[0] - lo[0], hi[1] - lo[1]];
+        if (span[0] / limit + 1.0) * (span[1] / limit + 1.0) > MAX_CELLS {
+            gaps.cell = ((span[0] + limit) * (span[1] + limit) / MAX_CELLS).sqrt();
+        }
+        gaps.nx = (span[0] / gaps.cell) as usize + 1;
+        gaps.ny = (span[1] / gaps.cell) as usize + 1;
+        // Two passes: count each cell's triangles, then place them.
+        let mut count = vec![0u32; gaps.nx * gaps.ny + 1];
+        for b in &boxes {
+            gaps.for_cells(b, |i| count[i + 1] += 1);
+        }
+        for i in 1..count.len() {
+            count[i] += count[i - 1];
+        }
+        let mut next = count.clone();
+        let mut bins = vec![0; count[count.len() - 1] as usize];
+        for (t, b) in boxes.iter().enumerate() {
+            gaps.for_cells(b, |i| {
+                bins[next[i] as usize] = t as u32;
+                next[i] += 1;
+            });
+        }
+        gaps.start = count;
+        gaps.bins = bins;
+        gaps.triangles = triangles;
+        gaps.boxes = boxes;
+        gaps
+    }
+
+    /// Calls `f` with the index of every cell that the box (min x, min y, max x, max y) touches;
+    /// parts of the box beyond the grid go to its border cells.
+    fn for_cells(&self, b: &[f64; 4], mut f: impl FnMut(usize)) {
+        let at = |v: f64, k: usize| {
+            // Negative and NaN go to 0, beyond the grid to its last cell.
+            let n = [self.nx, self.ny][k];
+            ((((v - self.origin[k]) / self.cell).floor()).max(0.0) as usize).min(n - 1)
+        };
+        for y in at(b[1], 1)..=at(b[3], 1) {
+            for x in at(b[0], 0)..=at(b[2], 0) {
+                f(y * self.nx + x);
+            }
+        }
+    }
+
+    /// Whether the disk meets one of the long-edged triangles. A disk with a non-finite
+    /// coordinate always counts.
+    pub(crate) fn touches(&self, d: &Disk) -> bool {
+        if !(d.center.iter().all(|c| c.is_finite()) && d.radius.is_finite()) {
+            return true;
+        }
+        if self.triangles.is_empty() {
+            return false;
+        }
+        let [x, y] = d.center;
+        let reach = [x - d.radius, y - d.radius, x + d.radius, y + d.radius];
+        let mut hit = false;
+        self.for_cells(&reach, |i| {
+            if !hit {
+                let bin = &self.bins[self.start[i] as usize..self.start[i + 1] as usize];
+                hit = bin.iter().any(|&t| {
+                    let b = &self.boxes[t as usize];
+                    // Most of a cell's triangles lie apart from the disk's box.
+                    b[0] <= reach[2]
+                        && reach[0] <= b[2]
+                        && b[1] <= reach[3]
+                        && reach[1] <= b[3]
+                        && meets(&self.triangles[t as usize], d)
+                });
+            }
+        });
+        hit
+    }
+}
+
+/// Whether the closed disk and the closed triangle share a point.
+fn meets(t: &[[f64; 2]; 3], d: &Disk) -> bool {
+    let p = d.center;
+    let cross =
+        |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0]);
+    let s = [cross(t[0], t[1]), cross(t[1], t[2]), cross(t[2], t[0])];
+    if s.iter().all(|&v| v >= 0.0) || s.iter().all(|&v| v <= 0.0) {
+        return true;
+    }
+    let r2 = d.radius * d.radius;
+    (0..3).any(|i| segment_distance2(p, t[i], t[(i + 1) % 3]) <= r2)
+}
+
+/// The squared distance from `p` to the segment `a`-`b`.
+fn segment_distance2(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1]];
+    let ap = [p[0] - a[0], p[1] - a[1]];
+    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+    let s = if len2 > 0.0 {
+        ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (ap[0] - s * ab[0]).powi(2) + (ap[1] - s * ab[1]).powi(2)
+}
+
+/// The disks of `inner` that meet a long-edged triangle of `gaps`.
+pub(crate) struct OverGaps<'a> {
+    pub inner: &'a dyn KeepOut,
+    pub gaps: &'a Gaps,
+}
+
+impl KeepOut for OverGaps<'_> {
+    fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk> {
+        let mut disks = self.inner.disks_on_plane(point, normal, bounds);
+        disks.retain(|d| self.gaps.touches(d));
+        disks
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_disk_meets_a_triangle_it_overlaps_or_holds_and_no_other() {
+        let t = [[0.0, 0.0], [4.0, 0.0], [0.0, 3.0]];
+        let disk = |x: f64, y: f64, r: f64| Disk {
+            center: [x, y],
+            radius: r,
+        };
+        // Inside, holding the triangle, over an edge, touching a corner.
+        assert!(meets(&t, &disk(1.0, 1.0, 0.1)));
+        assert!(meets(&t, &disk(1.0, 1.0, 10.0)));
+        assert!(meets(&t, &disk(2.0, -0.5, 0.6)));
+        assert!(meets(&t, &disk(-0.3, -0.4, 0.5)));
+        // Near but apart: below the base, past the hypotenuse, off a corner.
+        assert!(!meets(&t, &disk(2.0, -0.5, 0.4)));
+        assert!(!meets(&t, &disk(3.0, 3.0, 1.0)));
+        assert!(!meets(&t, &disk(-0.3, -0.4, 0.49)));
+        // Either orientation.
+        let cw = [t[0], t[2], t[1]];
+        assert!(meets(&cw, &disk(1.0, 1.0, 0.1)));
+        assert!(!meets(&cw, &disk(3.0, 3.0, 1.0)));
+    }
+}
