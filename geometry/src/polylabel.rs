@@ -376,8 +376,9 @@ impl Edges {
     }
 }
 
+/// The squared distance from `p` to the segment `a`-`b`.
 #[inline]
-fn segment_distance2(p: [f64; 2], ax: f64, ay: f64, bx: f64, by: f64) -> f64 {
+pub(crate) fn segment_distance2(p: [f64; 2], ax: f64, ay: f64, bx: f64, by: f64) -> f64 {
     let (dx, dy) = (bx - ax, by - ay);
     let len2 = dx * dx + dy * dy;
     let t = if len2 > 0.0 {

@@ -428,6 +428,7 @@ mod tests {
 pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
     let (head, body) = data.split_first_chunk::<8>()?;
     let unit = |b: u8| f64::from(b) / 255.0;
+    let with_disks = head[6] & 2 == 2;
     let params = crate::Params {
         l_max_m: 0.05 + unit(head[0]) * 20.0,
         dot_min: unit(head[1]) * 0.999,
@@ -441,7 +442,7 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         } else {
             0.0
         },
-        keep_out_trust_edge_m: if head[6] & 2 == 2 {
+        keep_out_trust_edge_m: if with_disks {
             f64::from(head[6] >> 2) / 63.0 * 5.0
         } else {
             0.0
@@ -457,7 +458,7 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         if p.iter().all(|c| c.is_finite() && c.abs() <= 1.0e7) {
             points.push(p);
             classes.push(chunk[12] % 15);
-            if head[6] & 2 == 2 && disks.len() < 8 {
+            if with_disks && disks.len() < 8 {
                 disks.push(crate::Disk {
                     center: [f64::from(p[0]), f64::from(p[1])],
                     radius: unit(chunk[12]) * 2.0,

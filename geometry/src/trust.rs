@@ -10,7 +10,7 @@
 //! long-edged triangles covers only that shown ground, and bounds no safe circle
 //! ([`crate::Params::keep_out_trust_edge_m`]).
 
-use crate::polylabel::Disk;
+use crate::polylabel::{Disk, segment_distance2};
 use crate::ranking::KeepOut;
 use crate::regions::Regions;
 use crate::triangulation::Triangulation;
@@ -73,61 +73,66 @@ impl Gaps {
             lo = [lo[0].min(b[0]), lo[1].min(b[1])];
             hi = [hi[0].max(b[2]), hi[1].max(b[3])];
         }
+        let span = [hi[0] - lo[0], hi[1] - lo[1]];
+        let cell = if (span[0] / limit + 1.0) * (span[1] / limit + 1.0) > MAX_CELLS {
+            ((span[0] + limit) * (span[1] + limit) / MAX_CELLS).sqrt()
+        } else {
+            limit
+        };
+        // No triangle: an empty grid of one cell.
+        let [nx, ny] = if triangles.is_empty() {
+            [1, 1]
+        } else {
+            span.map(|s| (s / cell) as usize + 1)
+        };
         let mut gaps = Self {
             origin: lo,
-            cell: limit,
-            nx: 0,
-            ny: 0,
-            start: vec![0],
+            cell,
+            nx,
+            ny,
+            start: Vec::new(),
             bins: Vec::new(),
-            triangles: Vec::new(),
+            triangles,
             boxes: Vec::new(),
         };
-        if triangles.is_empty() {
-            return gaps;
-        }
-        let span = [hi[0] - lo[0], hi[1] - lo[1]];
-        if (span[0] / limit + 1.0) * (span[1] / limit + 1.0) > MAX_CELLS {
-            gaps.cell = ((span[0] + limit) * (span[1] + limit) / MAX_CELLS).sqrt();
-        }
-        gaps.nx = (span[0] / gaps.cell) as usize + 1;
-        gaps.ny = (span[1] / gaps.cell) as usize + 1;
         // Two passes: count each cell's triangles, then place them.
-        let mut count = vec![0u32; gaps.nx * gaps.ny + 1];
+        let mut start = vec![0u32; nx * ny + 1];
         for b in &boxes {
-            gaps.for_cells(b, |i| count[i + 1] += 1);
+            for i in gaps.cells(b) {
+                start[i + 1] += 1;
+            }
         }
-        for i in 1..count.len() {
-            count[i] += count[i - 1];
+        for i in 1..start.len() {
+            start[i] += start[i - 1];
         }
-        let mut next = count.clone();
-        let mut bins = vec![0; count[count.len() - 1] as usize];
+        let mut next = start.clone();
+        let mut bins = vec![0; start[nx * ny] as usize];
         for (t, b) in boxes.iter().enumerate() {
-            gaps.for_cells(b, |i| {
+            for i in gaps.cells(b) {
                 bins[next[i] as usize] = t as u32;
                 next[i] += 1;
-            });
+            }
         }
-        gaps.start = count;
+        gaps.start = start;
         gaps.bins = bins;
-        gaps.triangles = triangles;
         gaps.boxes = boxes;
         gaps
     }
 
-    /// Calls `f` with the index of every cell that the box (min x, min y, max x, max y) touches;
-    /// parts of the box beyond the grid go to its border cells.
-    fn for_cells(&self, b: &[f64; 4], mut f: impl FnMut(usize)) {
+    /// The index of every cell that the box (min x, min y, max x, max y) touches; parts of the
+    /// box beyond the grid go to its border cells.
+    fn cells(&self, b: &[f64; 4]) -> impl Iterator<Item = usize> + use<> {
         let at = |v: f64, k: usize| {
             // Negative and NaN go to 0, beyond the grid to its last cell.
             let n = [self.nx, self.ny][k];
             ((((v - self.origin[k]) / self.cell).floor()).max(0.0) as usize).min(n - 1)
         };
-        for y in at(b[1], 1)..=at(b[3], 1) {
-            for x in at(b[0], 0)..=at(b[2], 0) {
-                f(y * self.nx + x);
-            }
-        }
+        let (xs, ys, nx) = (
+            at(b[0], 0)..=at(b[2], 0),
+            at(b[1], 1)..=at(b[3], 1),
+            self.nx,
+        );
+        ys.flat_map(move |y| xs.clone().map(move |x| y * nx + x))
     }
 
     /// Whether the disk meets one of the long-edged triangles. A disk with a non-finite
@@ -141,22 +146,18 @@ impl Gaps {
         }
         let [x, y] = d.center;
         let reach = [x - d.radius, y - d.radius, x + d.radius, y + d.radius];
-        let mut hit = false;
-        self.for_cells(&reach, |i| {
-            if !hit {
-                let bin = &self.bins[self.start[i] as usize..self.start[i + 1] as usize];
-                hit = bin.iter().any(|&t| {
-                    let b = &self.boxes[t as usize];
-                    // Most of a cell's triangles lie apart from the disk's box.
-                    b[0] <= reach[2]
-                        && reach[0] <= b[2]
-                        && b[1] <= reach[3]
-                        && reach[1] <= b[3]
-                        && meets(&self.triangles[t as usize], d)
-                });
-            }
-        });
-        hit
+        self.cells(&reach).any(|i| {
+            let bin = &self.bins[self.start[i] as usize..self.start[i + 1] as usize];
+            bin.iter().any(|&t| {
+                let b = &self.boxes[t as usize];
+                // Most of a cell's triangles lie apart from the disk's box.
+                b[0] <= reach[2]
+                    && reach[0] <= b[2]
+                    && b[1] <= reach[3]
+                    && reach[1] <= b[3]
+                    && meets(&self.triangles[t as usize], d)
+            })
+        })
     }
 }
 
@@ -170,20 +171,10 @@ fn meets(t: &[[f64; 2]; 3], d: &Disk) -> bool {
         return true;
     }
     let r2 = d.radius * d.radius;
-    (0..3).any(|i| segment_distance2(p, t[i], t[(i + 1) % 3]) <= r2)
-}
-
-/// The squared distance from `p` to the segment `a`-`b`.
-fn segment_distance2(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
-    let ab = [b[0] - a[0], b[1] - a[1]];
-    let ap = [p[0] - a[0], p[1] - a[1]];
-    let len2 = ab[0] * ab[0] + ab[1] * ab[1];
-    let s = if len2 > 0.0 {
-        ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    (ap[0] - s * ab[0]).powi(2) + (ap[1] - s * ab[1]).powi(2)
+    (0..3).any(|i| {
+        let (a, b) = (t[i], t[(i + 1) % 3]);
+        segment_distance2(p, a[0], a[1], b[0], b[1]) <= r2
+    })
 }
 
 /// The disks of `inner` that meet a long-edged triangle of `gaps`.
