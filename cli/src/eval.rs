@@ -68,6 +68,11 @@ pub struct EvalArgs {
     /// unsafe fused site.
     #[arg(long)]
     pub stream: bool,
+    /// With `--stream`: frames of a fused stream sent and unanswered at once. 1 scores each
+    /// answer before sending the next frame, so that the scoring does not share the machine
+    /// with the server's work (paired timing runs on one box).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub window: u32,
 }
 
 /// The built-in scenario sets.
@@ -203,6 +208,7 @@ pub async fn eval_cmd(
             enabled: true,
             ..Default::default()
         }),
+        stream_max_in_flight: args.window as usize,
         ..Default::default()
     };
     for s in &mut scenarios {

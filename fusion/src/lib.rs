@@ -245,7 +245,7 @@ impl<'a, K> Scan<'a, K> {
 /// the patch of level ground that one of its class pixels covers there, or `None` where the
 /// camera did not see.
 #[derive(Clone, Copy)]
-pub struct View<'a>(pub &'a dyn Fn(&[f64; 3]) -> Option<f64>);
+pub struct View<'a>(pub &'a (dyn Fn(&[f64; 3]) -> Option<f64> + Sync));
 
 impl std::fmt::Debug for View<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -293,6 +293,32 @@ pub struct Fused {
     /// obstacles has seen it ([`FusionParams::max_footprint_m`]): the cell could lie on an
     /// obstacle the camera could not resolve. All `false` with the rule off.
     pub unresolved: Vec<bool>,
+}
+
+/// A scan [`FusionMap::place`]d and not yet voted: where its points fell.
+#[derive(Debug)]
+pub struct Placed {
+    /// (cell, point index) of every usable point, grouped by cell.
+    keyed: Vec<([i32; 3], u32)>,
+    time_s: f64,
+    reset: Option<Reset>,
+}
+
+impl Placed {
+    /// Why placing the scan started the map over, if it did.
+    pub fn reset(&self) -> Option<&Reset> {
+        self.reset.as_ref()
+    }
+}
+
+/// The map's top surface ([`FusionMap::surface`]): one point per column, in a deterministic
+/// order (by cell).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Surface {
+    /// The top cell of each column.
+    keys: Vec<[i32; 3]>,
+    /// Its mean point, world frame.
+    pub points: Vec<[f64; 3]>,
 }
 
 /// The centre of the bounding box of the finite `points`, or `fallback` when none is: a local
@@ -457,32 +483,57 @@ impl<K> FusionMap<K> {
         self.classified = false;
     }
 
-    /// Adds a scan; returns why the map started over first, if it did.
+    /// Adds a scan; returns why the map started over first, if it did. The same as
+    /// [`FusionMap::place`] then [`FusionMap::vote`].
     pub fn insert(&mut self, scan: Scan<'_, K>) -> Option<Reset> {
-        let reset = self.would_reset(&scan);
+        let placed = self.place(&scan);
+        self.vote(placed, scan)
+    }
+
+    /// Adds a scan's points (starting the map over first where [`FusionMap::would_reset`] says
+    /// so): the map's cells, their positions and so its [`FusionMap::surface`] are then final
+    /// for this scan; its classes, view and keep-out footprints (ignored here) come with
+    /// [`FusionMap::vote`]. A caller can thus work on the surface while the scan's classes are
+    /// still being made. Until `vote`, the scan's cells hold no vote of it.
+    pub fn place(&mut self, scan: &Scan<'_, K>) -> Placed {
+        let reset = self.would_reset(scan);
         if reset.is_some() {
             self.clear();
         }
         self.drone_id.clear();
         self.drone_id.push_str(scan.drone_id);
         let cell = self.params.cell_m;
-        let origin = *self.origin.get_or_insert_with(|| anchor(&scan, cell));
+        let origin = *self.origin.get_or_insert_with(|| anchor(scan, cell));
         if self.last.is_none() {
             self.start_s = scan.time_s;
         }
         self.last = Some((scan.time_s, scan.sensor));
         self.frames += 1;
         let seen_s = (scan.time_s - self.start_s) as f32;
+        let keyed = self.add_points(scan, origin, seen_s);
+        self.forget_cells(seen_s);
+        Placed {
+            keyed,
+            time_s: scan.time_s,
+            reset,
+        }
+    }
 
-        self.add_points(&scan, origin, seen_s);
+    /// Adds the classes, view and keep-out footprints of the scan `placed` came from (`scan`,
+    /// whose points must be those given to [`FusionMap::place`]); returns why the map started
+    /// over, if it did.
+    pub fn vote(&mut self, placed: Placed, scan: Scan<'_, K>) -> Option<Reset> {
+        let Some(origin) = self.origin else {
+            return placed.reset;
+        };
+        self.add_votes(&placed.keyed, &scan);
         if let Some(view) = scan.view.filter(|_| scan.classes.is_some()) {
             self.resolve(view, origin);
         }
         if let Some(k) = scan.keep_out {
-            self.add_keep_out(scan.time_s, k);
+            self.add_keep_out(placed.time_s, k);
         }
-        self.forget(seen_s);
-        reset
+        placed.reset
     }
 
     /// The map's top surface: of each column of cells (same x/y), the highest, whose x/y lie
@@ -494,31 +545,34 @@ impl<K> FusionMap<K> {
     /// landable class (flagged [`Fused::unresolved`] until a fine enough view saw the cell),
     /// else 0.
     pub fn fused(&self, bounds: [[f64; 2]; 2], is_landable: impl Fn(u8) -> bool) -> Fused {
+        let surface = self.surface(bounds);
+        let (classes, unresolved) = self.classes_of(&surface, is_landable);
+        Fused {
+            points: surface.points,
+            classes,
+            unresolved,
+        }
+    }
+
+    /// The points of [`FusionMap::fused`] alone: its votes and views do not move them.
+    pub fn surface(&self, bounds: [[f64; 2]; 2]) -> Surface {
         let Some(origin) = self.origin else {
-            return Fused::default();
+            return Surface::default();
         };
         let c = self.params.cell_m;
-        let position = |key: &[i32; 3], cell: &Cell| cell.position(key, origin, c);
         let inside = |p: &[f64; 3]| {
             p[0] >= bounds[0][0]
                 && p[0] <= bounds[1][0]
                 && p[1] >= bounds[0][1]
                 && p[1] <= bounds[1][1]
         };
-        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
-        let weight = self.params.obstacle_weight;
-        let resolving = self.params.max_footprint_m > 0.0;
-        // Everything an answer needs of a cell, read in the table's own (memory) order: sorting
-        // references instead would chase each one afterwards. Keys are packed into one integer
-        // in (x, y, z) order, one comparison per step of the sort.
-        let mut columns: Vec<(u128, [f64; 3], u8, bool)> = self
+        // Read in the table's own (memory) order: sorting references instead would chase each
+        // one afterwards. Keys are packed into one integer in (x, y, z) order, one comparison
+        // per step of the sort.
+        let mut columns: Vec<(u128, [f64; 3])> = self
             .cells
             .iter()
-            .map(|(key, cell)| {
-                let class = decide(&cell.votes, &landable, weight);
-                let unresolved = resolving && !cell.resolved && landable[usize::from(class)];
-                (sort_key(key), position(key, cell), class, unresolved)
-            })
+            .map(|(key, cell)| (sort_key(key), cell.position(key, origin, c)))
             .collect();
         columns.sort_unstable_by_key(|column| column.0);
         // Sorted by (x, y, z): the last cell of each column is its top.
@@ -530,13 +584,37 @@ impl<K> FusionMap<K> {
             same_column
         });
         columns.retain(|column| inside(&column.1));
-        Fused {
-            points: columns.iter().map(|column| column.1).collect(),
-            classes: self
-                .classified
-                .then(|| columns.iter().map(|column| column.2).collect()),
-            unresolved: columns.iter().map(|column| column.3).collect(),
+        Surface {
+            keys: columns.iter().map(|column| unsort_key(column.0)).collect(),
+            points: columns.into_iter().map(|column| column.1).collect(),
         }
+    }
+
+    /// The classes and [`Fused::unresolved`] flags of a `surface` of this map, as
+    /// [`FusionMap::fused`] gives them (a cell forgotten since reads as unknown).
+    pub fn classes_of(
+        &self,
+        surface: &Surface,
+        is_landable: impl Fn(u8) -> bool,
+    ) -> (Option<Vec<u8>>, Vec<bool>) {
+        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
+        let weight = self.params.obstacle_weight;
+        let resolving = self.params.max_footprint_m > 0.0;
+        let (classes, unresolved) = surface
+            .keys
+            .iter()
+            .map(|key| {
+                let Some(cell) = self.cells.get(key) else {
+                    return (0, false);
+                };
+                let class = decide(&cell.votes, &landable, weight);
+                (
+                    class,
+                    resolving && !cell.resolved && landable[usize::from(class)],
+                )
+            })
+            .unzip();
+        (self.classified.then_some(classes), unresolved)
     }
 
     /// The kept keep-out footprints, oldest first.
@@ -605,17 +683,17 @@ impl<K> FusionMap<K> {
 }
 
 impl<K> FusionMap<K> {
-    /// Thins the scan into the cells: each frame gives a cell one vote, the majority class of
-    /// its points there.
-    fn add_points(&mut self, scan: &Scan<'_, K>, origin: [f64; 3], seen_s: f32) {
+    /// Thins the scan's points into the cells; returns (cell, point index) of every usable
+    /// point, grouped by cell.
+    fn add_points(
+        &mut self,
+        scan: &Scan<'_, K>,
+        origin: [f64; 3],
+        seen_s: f32,
+    ) -> Vec<([i32; 3], u32)> {
         let c = self.params.cell_m;
-        let classes = scan.classes.filter(|k| k.len() == scan.points.len());
-        self.classified |= classes.is_some();
-        // Classes that came from no camera are as fine as their source.
-        let resolved = classes.is_some() && scan.view.is_none();
-        // (cell, offset in the cell in cell units, class, index) of every usable point, grouped
-        // by cell.
-        let mut keyed: Vec<([i32; 3], [f32; 3], u8, u32)> = Vec::with_capacity(scan.points.len());
+        // (cell, offset in the cell in cell units, index) of every usable point.
+        let mut keyed: Vec<([i32; 3], [f32; 3], u32)> = Vec::with_capacity(scan.points.len());
         for (i, p) in scan.points.iter().enumerate() {
             let rel = [
                 (p[0] - origin[0]) / c,
@@ -628,61 +706,74 @@ impl<K> FusionMap<K> {
             }
             let key = rel.map(|v| v.floor() as i32);
             let offset = std::array::from_fn(|k| (rel[k] - f64::from(key[k])) as f32);
-            let class = classes.map_or(0, |k| k[i]);
-            keyed.push((key, offset, class, i as u32));
+            keyed.push((key, offset, i as u32));
         }
         keyed.sort_unstable_by_key(|k| k.0);
         for group in keyed.chunk_by(|a, b| a.0 == b.0) {
-            let key = group[0].0;
-            let mut counts = [0u32; CLASSES];
-            for &(_, _, class, _) in group {
-                counts[usize::from(class).min(CLASSES - 1)] += 1;
-            }
-            let cell = self.cells.entry(key).or_insert(Cell {
+            let cell = self.cells.entry(group[0].0).or_insert(Cell {
                 mean: [0.0; 3],
                 points: 0,
                 votes: [0; CLASSES],
                 seen_s,
-                resolved,
+                resolved: false,
                 finest: f32::INFINITY,
             });
             cell.seen_s = seen_s;
-            cell.resolved |= resolved;
-            for &(_, offset, _, _) in group {
+            for &(_, offset, _) in group {
                 let n = f32::from(cell.points.min(MAX_MEAN_WEIGHT - 1));
                 for (mean, o) in cell.mean.iter_mut().zip(offset) {
                     *mean = (*mean * n + o) / (n + 1.0);
                 }
                 cell.points = cell.points.saturating_add(1);
             }
-            if classes.is_some() {
-                // A much finer view than every earlier one that voted here replaces their votes:
-                // a far frame's pixel is smeared over the cell's surroundings (an edge, a
-                // parapet, a camera blocked while its LiDAR sees), and votes of views about as
-                // fine add up.
-                let footprint = scan
-                    .view
-                    .and_then(|view| (view.0)(&scan.points[group[0].3 as usize]))
-                    .map(|f| f as f32);
-                if let Some(f) = footprint {
-                    if f <= FINER_VIEW * cell.finest {
-                        cell.votes = [0; CLASSES];
-                    }
-                    cell.finest = cell.finest.min(f);
-                }
-                // The frame's majority class; ties go to the obstacle-most (highest) id.
-                let (class, _) = counts
-                    .iter()
-                    .enumerate()
-                    .max_by_key(|&(i, &n)| (n, i))
-                    .unwrap_or((0, &0));
-                if cell.votes[class] == u8::MAX {
-                    for v in &mut cell.votes {
-                        *v = v.div_ceil(2);
-                    }
-                }
-                cell.votes[class] += 1;
+        }
+        keyed.into_iter().map(|(key, _, i)| (key, i)).collect()
+    }
+
+    /// Gives each cell the scan's points fell in one vote: the majority class of its points
+    /// there (`keyed` as [`FusionMap::add_points`] returned it).
+    fn add_votes(&mut self, keyed: &[([i32; 3], u32)], scan: &Scan<'_, K>) {
+        let Some(classes) = scan.classes.filter(|k| k.len() == scan.points.len()) else {
+            return;
+        };
+        self.classified = true;
+        // Classes that came from no camera are as fine as their source.
+        let resolved = scan.view.is_none();
+        for group in keyed.chunk_by(|a, b| a.0 == b.0) {
+            // Forgotten already where the scan alone overfilled the map.
+            let Some(cell) = self.cells.get_mut(&group[0].0) else {
+                continue;
+            };
+            cell.resolved |= resolved;
+            let mut counts = [0u32; CLASSES];
+            for &(_, i) in group {
+                counts[usize::from(classes[i as usize]).min(CLASSES - 1)] += 1;
             }
+            // A much finer view than every earlier one that voted here replaces their votes: a
+            // far frame's pixel is smeared over the cell's surroundings (an edge, a parapet, a
+            // camera blocked while its LiDAR sees), and votes of views about as fine add up.
+            let footprint = scan
+                .view
+                .and_then(|view| (view.0)(&scan.points[group[0].1 as usize]))
+                .map(|f| f as f32);
+            if let Some(f) = footprint {
+                if f <= FINER_VIEW * cell.finest {
+                    cell.votes = [0; CLASSES];
+                }
+                cell.finest = cell.finest.min(f);
+            }
+            // The frame's majority class; ties go to the obstacle-most (highest) id.
+            let (class, _) = counts
+                .iter()
+                .enumerate()
+                .max_by_key(|&(i, &n)| (n, i))
+                .unwrap_or((0, &0));
+            if cell.votes[class] == u8::MAX {
+                for v in &mut cell.votes {
+                    *v = v.div_ceil(2);
+                }
+            }
+            cell.votes[class] += 1;
         }
     }
 
@@ -715,14 +806,13 @@ impl<K> FusionMap<K> {
         while self.keep_out.len() > self.params.keep_out_frames {
             self.keep_out.pop_front();
         }
+        let horizon = self.params.horizon_s;
+        self.keep_out.retain(|(t, _)| time_s - t <= horizon);
     }
 
-    /// Forgets cells and footprints past the horizon, then the oldest cells past the bound.
-    fn forget(&mut self, now_s: f32) {
+    /// Forgets cells past the horizon, then the oldest cells past the bound.
+    fn forget_cells(&mut self, now_s: f32) {
         let horizon = self.params.horizon_s as f32;
-        let newest = self.keep_out.back().map(|(t, _)| *t);
-        self.keep_out
-            .retain(|(t, _)| newest.is_some_and(|n| n - t <= f64::from(horizon)));
         let full = self.cells.len() > self.params.max_cells;
         if full || self.frames.is_multiple_of(EXPIRY_EVERY_FRAMES) {
             self.cells.retain(|_, cell| now_s - cell.seen_s <= horizon);
@@ -744,6 +834,11 @@ impl<K> FusionMap<K> {
 fn sort_key(key: &[i32; 3]) -> u128 {
     let flip = |v: i32| u128::from((v as u32) ^ 0x8000_0000);
     flip(key[0]) << 64 | flip(key[1]) << 32 | flip(key[2])
+}
+
+/// The key [`sort_key`] packed.
+fn unsort_key(packed: u128) -> [i32; 3] {
+    std::array::from_fn(|i| ((packed >> (64 - 32 * i)) as u32 ^ 0x8000_0000) as i32)
 }
 
 /// The class a cell's votes decide (see [`FusionMap::fused`]).

@@ -431,6 +431,51 @@ proptest! {
             prop_assert!(f.classes.as_ref().is_none_or(|c| c.iter().all(|&k| k < 16)));
         }
     }
+
+    /// Placing a scan, then voting, is inserting it; the surface is final once the scan is
+    /// placed (votes and views do not move it), so a caller can triangulate it meanwhile.
+    #[test]
+    fn placing_then_voting_is_inserting(
+        scans in prop::collection::vec(
+            (prop::collection::vec((-20.0..20.0f64, -20.0..20.0f64, 0.0..40.0f64, 0u8..20), 0..300),
+             0.0..0.3f64, any::<bool>(), any::<bool>(), 0u8..3),
+            1..10),
+    ) {
+        let params = FusionParams { max_cells: 1_000, ..FusionParams::default() };
+        let mut inserted: FusionMap<u32> = FusionMap::new(params).unwrap();
+        let mut split: FusionMap<u32> = FusionMap::new(params).unwrap();
+        let fine = |p: &[f64; 3]| (p[0] < 0.0).then_some(0.1);
+        let coarse = |p: &[f64; 3]| (p[1] < 5.0).then_some(0.5);
+        let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+        let mut t = 0.0;
+        for (k, (points, dt, reset, classified, view)) in scans.iter().enumerate() {
+            t += dt;
+            let pts: Vec<[f64; 3]> = points.iter().map(|p| [p.0, p.1, p.2]).collect();
+            let classes: Vec<u8> = points.iter().map(|p| p.3).collect();
+            let s = Scan {
+                reset: *reset,
+                classes: classified.then_some(&classes[..]),
+                view: match view {
+                    0 => None,
+                    1 => Some(View(&fine)),
+                    _ => Some(View(&coarse)),
+                },
+                keep_out: Some(k as u32),
+                ..scan(t, &pts, &classes)
+            };
+            let expected = inserted.insert(s.clone());
+            let placed = split.place(&s);
+            prop_assert_eq!(placed.reset(), expected.as_ref());
+            let surface = split.surface(everything);
+            prop_assert_eq!(split.vote(placed, s), expected);
+            let want = inserted.fused(everything, landable);
+            prop_assert_eq!(&surface.points, &want.points);
+            let (classes, unresolved) = split.classes_of(&surface, landable);
+            prop_assert_eq!(classes, want.classes);
+            prop_assert_eq!(unresolved, want.unresolved);
+            prop_assert!(split.keep_outs().eq(inserted.keep_outs()));
+        }
+    }
 }
 
 #[test]

@@ -366,7 +366,13 @@ pub fn detect_with(
     params: &Params,
     triangulation: &TriangulationConfig,
 ) -> Result<Detection, GeometryError> {
-    run(points, classes, params, triangulation, KeepClear::default())
+    run(
+        points,
+        classes,
+        params,
+        Mesh::Make(triangulation),
+        KeepClear::default(),
+    )
 }
 
 /// [`detect`] whose safe circles also stay clear of what `keep_clear` names: obstacles that the
@@ -382,16 +388,49 @@ pub fn detect_keeping_out(
         points,
         classes,
         params,
-        &TriangulationConfig::default(),
+        Mesh::Make(&TriangulationConfig::default()),
         keep_clear,
     )
+}
+
+/// [`detect_keeping_out`] on points already triangulated: `tri` must be
+/// [`triangulation::triangulate`] of `points` (their x/y widened to `f64`), made beforehand,
+/// say on another thread while their classes were still being made; its time is the caller's
+/// and reported as zero. A triangulation that names a point `points` lacks gives
+/// [`GeometryError::InvalidMesh`].
+pub fn detect_keeping_out_triangulated(
+    points: &[[f32; 3]],
+    tri: Triangulation,
+    classes: Option<&[u8]>,
+    params: &Params,
+    keep_clear: KeepClear<'_>,
+) -> Result<Detection, GeometryError> {
+    if tri.halfedges.len() != tri.triangles.len()
+        || !tri.triangles.len().is_multiple_of(3)
+        || tri.triangles.iter().any(|&v| v as usize >= points.len())
+    {
+        return Err(GeometryError::InvalidMesh {
+            reason: format!(
+                "a triangulation of {} vertex slots for {} points",
+                tri.triangles.len(),
+                points.len()
+            ),
+        });
+    }
+    run(points, classes, params, Mesh::Given(tri), keep_clear)
+}
+
+/// Where [`run`]'s triangulation comes from.
+enum Mesh<'a> {
+    Make(&'a TriangulationConfig),
+    Given(Triangulation),
 }
 
 fn run(
     points: &[[f32; 3]],
     classes: Option<&[u8]>,
     params: &Params,
-    triangulation: &TriangulationConfig,
+    mesh: Mesh<'_>,
     keep_clear: KeepClear<'_>,
 ) -> Result<Detection, GeometryError> {
     params.validate()?;
@@ -411,7 +450,10 @@ fn run(
     let mut timings = StepTimings::default();
 
     let t0 = Instant::now();
-    let tri = triangulation::triangulate(&pts, triangulation)?;
+    let tri = match mesh {
+        Mesh::Make(config) => triangulation::triangulate(&pts, config)?,
+        Mesh::Given(tri) => tri,
+    };
     let t1 = Instant::now();
     timings.triangulation = t1 - t0;
 

@@ -5,7 +5,7 @@ use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof, fuzz_de
 use landing_geometry::validation::{Location, check_detection, locate_in_ring};
 use landing_geometry::{
     Detection, Disk, GeometryError, KeepClear, Params, Polygon, SemanticClass, TriangulationConfig,
-    Triangulator, detect, detect_keeping_out, detect_with,
+    Triangulator, detect, detect_keeping_out, detect_keeping_out_triangulated, detect_with,
 };
 
 /// Runs `detect` and checks every invariant of the result.
@@ -406,6 +406,56 @@ fn results_are_deterministic_and_triangulator_independent() {
         assert_eq!(x.polygon, y.polygon);
         assert_eq!(x.safe_radius_m, y.safe_radius_m);
     }
+}
+
+#[test]
+fn a_triangulation_made_beforehand_gives_the_same_detection() {
+    let params = SceneParams {
+        obstacles: 5,
+        point_count: 4000,
+        ..SceneParams::default()
+    };
+    let s = Scene::generate(&params, 22);
+    let vent = |point: [f64; 3], _normal: [f64; 3], _bounds: [f64; 4]| {
+        vec![Disk {
+            center: [point[0] + 1.0, point[1]],
+            radius: 0.4,
+        }]
+    };
+    let flags: Vec<bool> = (0..s.points.len()).map(|i| i % 97 == 0).collect();
+    let keep_clear = || KeepClear {
+        disks: Some(&vent),
+        points: Some(&flags),
+    };
+    let strip = |mut d: Detection| {
+        d.timings = Default::default();
+        d
+    };
+    let params = Params::default();
+    let made =
+        strip(detect_keeping_out(&s.points, Some(&s.classes), &params, keep_clear()).unwrap());
+    let wide: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
+    let tri = landing_geometry::triangulation::triangulate(&wide, &TriangulationConfig::default())
+        .unwrap();
+    let given = strip(
+        detect_keeping_out_triangulated(
+            &s.points,
+            tri.clone(),
+            Some(&s.classes),
+            &params,
+            keep_clear(),
+        )
+        .unwrap(),
+    );
+    assert!(!made.sites.is_empty());
+    assert_eq!(made, given);
+    // A triangulation of other points is refused, not indexed out of bounds.
+    let few = &s.points[..s.points.len() / 2];
+    let err = detect_keeping_out_triangulated(few, tri, None, &params, KeepClear::default());
+    assert!(
+        matches!(err, Err(GeometryError::InvalidMesh { .. })),
+        "{err:?}"
+    );
 }
 
 /// Largest signed distance on a grid of step `step` over the polygon's bounding box.

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use landing_fusion::{Correction, FusionMap, NotRegistered, Scan, View};
-use landing_geometry::{Disk, KeepClear, Params};
+use landing_geometry::{Disk, KeepClear, Params, Triangulation, TriangulationConfig};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
@@ -221,6 +221,7 @@ pub fn run_pipeline(
         unresolved: &[],
         origin,
         params: &options.params,
+        triangulated: None,
     };
     locate(frame, located, c.mode, c.timings, start)
 }
@@ -279,16 +280,51 @@ pub fn run_fused(
     };
     let origin = map.origin_for(&scan);
     let by = to_local(origin) * correction;
-    // The votes of every frame that saw a cell guard its class, and several frames' keep-out
-    // footprints are kept (see Judged).
-    let mut c = classify(
-        frame,
-        &by,
-        relative_to(&points, origin),
-        options,
-        pipeline,
-        Judged::InStream,
-    )?;
+    // What can be wrong with the frame's input is found before the map changes.
+    let decoded = decode(frame, options, pipeline)?;
+    // The frame's classes (the segmentation model's work) are made on this thread while another
+    // adds the scan's points to the map and triangulates its top surface: votes do not move the
+    // map's points. The answer covers everything the map holds: what the approach has scanned
+    // of the roof (and around it) within the horizon, not only the current scan's footprint,
+    // which shrinks as the drone descends.
+    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+    let (classified, surfaced) = std::thread::scope(|threads| {
+        let surfacing = threads.spawn(|| {
+            let t = Instant::now();
+            let placed = map.place(&scan);
+            let surface = map.surface(everything);
+            let world = relative_to(&surface.points, origin);
+            let placing = t.elapsed();
+            let t = Instant::now();
+            let tri = landing_geometry::triangulation::triangulate(
+                &widen(&world),
+                &TriangulationConfig::default(),
+            );
+            (placed, surface, world, tri, placing, t.elapsed())
+        });
+        let classified = classify_decoded(
+            frame,
+            decoded,
+            &by,
+            relative_to(&points, origin),
+            options,
+            pipeline,
+            Judged::InStream,
+        );
+        (classified, surfacing.join())
+    });
+    let Ok((placed, surface, world, tri, placing, triangulation)) = surfaced else {
+        map.clear();
+        return Err(Error::Internal("fusing the frame's points panicked".into()));
+    };
+    let mut c = match classified {
+        Ok(c) => c,
+        Err(e) => {
+            // The scan's points are in and its classes cannot be: start the map over.
+            map.clear();
+            return Err(e);
+        }
+    };
     let map_start = Instant::now();
     // How finely the frame's camera saw each place (the map's positions are world ones, the
     // view's frame-local): safe circles keep clear of what no fine view has seen.
@@ -296,20 +332,18 @@ pub fn run_fused(
     let footprint = c.view.as_ref().map(|view| {
         move |p: &[f64; 3]| view.footprint_on_level_ground(&(local * Point3::from(*p)))
     });
-    let reset = map.insert(Scan {
-        classes: c.classes.as_deref(),
-        view: footprint.as_ref().map(|f| View(f)),
-        keep_out: c.obstacles.take(),
-        ..scan
-    });
+    let reset = map.vote(
+        placed,
+        Scan {
+            classes: c.classes.as_deref(),
+            view: footprint.as_ref().map(|f| View(f)),
+            keep_out: c.obstacles.take(),
+            ..scan
+        },
+    );
     let landable = &options.params.landable_classes;
-    // The answer covers everything the map holds: what the approach has scanned of the roof
-    // (and around it) within the horizon, not only the current scan's footprint, which shrinks
-    // as the drone descends.
-    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
-    let fused = map.fused(everything, |class| landable.contains(&class));
-    let world = relative_to(&fused.points, origin);
-    fusion_time += map_start.elapsed();
+    let (classes, unresolved) = map.classes_of(&surface, |class| landable.contains(&class));
+    fusion_time += placing + map_start.elapsed();
     c.timings.fusion = Some(fusion_time);
     let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
     let summary = FusionSummary {
@@ -335,11 +369,12 @@ pub fn run_fused(
     };
     let located = Located {
         world: &world,
-        classes: fused.classes.as_deref(),
+        classes: classes.as_deref(),
         keep_out: &keep_out,
-        unresolved: &fused.unresolved,
+        unresolved: &unresolved,
         origin,
         params: &params,
+        triangulated: Some((tri?, triangulation)),
     };
     let mut out = locate(frame, located, c.mode, c.timings, start)?;
     out.fusion = Some(summary);
@@ -349,6 +384,11 @@ pub fn run_fused(
 /// The move from world coordinates to those relative to `origin`.
 fn to_local(origin: [f64; 3]) -> Isometry3<f64> {
     Isometry3::translation(-origin[0], -origin[1], -origin[2])
+}
+
+/// `points` widened to the double precision the geometry triangulates in.
+fn widen(points: &[[f32; 3]]) -> Vec<[f64; 3]> {
+    points.iter().map(|p| p.map(f64::from)).collect()
 }
 
 /// `points` relative to `origin`, in the single precision the geometry takes.
@@ -384,22 +424,59 @@ fn classify(
     pipeline: &Pipeline,
     judged: Judged,
 ) -> Result<Classified, Error> {
+    let decoded = decode(frame, options, pipeline)?;
+    classify_decoded(frame, decoded, by, world, options, pipeline, judged)
+}
+
+/// A frame's images decoded and its mode resolved: what can be wrong with its input is known.
+struct Decoded {
+    mode: SegmentationMode,
+    image: Option<landing_perception::RgbImage>,
+    class_mask: Option<landing_perception::ClassMask>,
+    timings: StageTimings,
+}
+
+/// Resolves the frame's mode and decodes its images.
+fn decode(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<Decoded, Error> {
     let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
-
     // Every image is decoded, so that a bad one is reported whatever the mode.
     let decode_start = Instant::now();
-    let decoded = match &frame.image {
-        Some(image) => Some((image, segmentation::decode(image)?)),
-        None => None,
-    };
-    let class_mask = match &frame.class_image {
-        Some(image) => Some((image, segmentation::decode_classes(image)?)),
-        None => None,
-    };
-    if decoded.is_some() || class_mask.is_some() {
+    let image = frame.image.as_ref().map(segmentation::decode).transpose()?;
+    let class_mask = frame
+        .class_image
+        .as_ref()
+        .map(segmentation::decode_classes)
+        .transpose()?;
+    if image.is_some() || class_mask.is_some() {
         timings.decode = Some(decode_start.elapsed());
     }
+    Ok(Decoded {
+        mode,
+        image,
+        class_mask,
+        timings,
+    })
+}
+
+/// [`classify`] once the frame is [`decode`]d.
+fn classify_decoded(
+    frame: &Frame,
+    decoded: Decoded,
+    by: &Isometry3<f64>,
+    world: Vec<[f32; 3]>,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+    judged: Judged,
+) -> Result<Classified, Error> {
+    let Decoded {
+        mode,
+        image,
+        class_mask,
+        mut timings,
+    } = decoded;
+    let decoded = frame.image.as_ref().zip(image.as_ref());
+    let class_mask = frame.class_image.as_ref().zip(class_mask.as_ref());
     let landable = &options.params.landable_classes;
     let mut obstacles = None;
     let mut view = None;
@@ -467,6 +544,8 @@ struct Located<'a> {
     origin: [f64; 3],
     /// The request's parameters, or the fused stream's form of them.
     params: &'a Params,
+    /// The points' triangulation and its time, when it was made beforehand.
+    triangulated: Option<(Triangulation, Duration)>,
 }
 
 /// The geometry on classified frame-local points, and the world/geodetic results.
@@ -484,11 +563,13 @@ fn locate(
         unresolved,
         origin,
         params,
+        triangulated,
     } = input;
 
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
     // what fell between the LiDAR's scan lines.
-    let detection = if keep_out.is_empty() && unresolved.is_empty() {
+    let (given, triangulation) = triangulated.unzip();
+    let detection = if keep_out.is_empty() && unresolved.is_empty() && given.is_none() {
         landing_geometry::detect(world, classes, params)?
     } else {
         // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
@@ -503,10 +584,15 @@ fn locate(
             disks: Some(&disks),
             points: (!unresolved.is_empty()).then_some(unresolved),
         };
-        landing_geometry::detect_keeping_out(world, classes, params, keep_clear)?
+        match given {
+            Some(tri) => landing_geometry::detect_keeping_out_triangulated(
+                world, tri, classes, params, keep_clear,
+            )?,
+            None => landing_geometry::detect_keeping_out(world, classes, params, keep_clear)?,
+        }
     };
     let t = detection.timings;
-    timings.triangulation = Some(t.triangulation);
+    timings.triangulation = Some(triangulation.unwrap_or(t.triangulation));
     timings.triangle_filter = Some(t.triangle_filter);
     timings.plane_extraction = Some(t.plane_extraction);
     timings.polygon_extraction = Some(t.polygon_extraction);
