@@ -18,6 +18,12 @@
 //! - the keep-out footprints of recent frames' obstacle pixels (`K`, opaque here: the server
 //!   stores the camera's obstacle rays), spread over the approach.
 //!
+//! A scan is added in two steps, [`FusionMap::place`] (its points: the cells and their
+//! positions, so the [`FusionMap::surface`] answers take is then final) and
+//! [`FusionMap::vote`] (its classes, view and keep-out footprints), so that a caller can
+//! triangulate the surface while the scan's classes are still being made; [`FusionMap::insert`]
+//! does both.
+//!
 //! Before a scan is added, [`FusionMap::register`] finds the small rigid correction that lays it
 //! onto the map's planes (a drone's pose is off by centimetres and a tenth of a degree, enough
 //! to smear the map); the caller moves the scan and its poses by it.
