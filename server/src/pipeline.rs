@@ -226,8 +226,10 @@ pub fn run_pipeline(
     locate(frame, located, c.mode, c.timings, start)
 }
 
-/// Runs the pipeline on a fused stream's frame: the frame is classified as alone, added to the
-/// stream's `map`, and the answer is computed from all the map's points (what the approach has
+/// Runs the pipeline on a fused stream's frame: the frame's points are added to the stream's
+/// `map` and its top surface triangulated on a second thread while the frame is classified
+/// ([`Judged::InStream`]), its classes then vote, and the answer is computed from all the map's
+/// points (what the approach has
 /// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers,
 /// with the pinholes of its dense planes closed (`Params::close_pinholes`) and its polygons'
 /// edges halfway to the first point that is not theirs (`Params::midpoint_max_edge_m`).
@@ -800,6 +802,40 @@ mod tests {
         let fused = run_fused(&f, &options, &pipeline, &mut map, false).unwrap();
         assert_eq!(fused.sites.len(), 1);
         assert_eq!(holes(&fused), 0);
+    }
+
+    #[test]
+    fn a_fused_frame_with_a_bad_image_is_refused_before_the_map_changes() {
+        let points: Vec<[f64; 3]> = (0..400)
+            .map(|i| [0.3 * f64::from(i % 20), 0.3 * f64::from(i / 20), -20.0])
+            .collect();
+        let classes = vec![landing_geometry::SemanticClass::BuildingRooftop as u8; points.len()];
+        let good = frame(points.clone(), Some(classes.clone()));
+        let (options, pipeline) = (FrameOptions::default(), Pipeline::default());
+        let mut map = StreamMap::new(crate::Config::default().fusion.params()).unwrap();
+        run_fused(&good, &options, &pipeline, &mut map, false).unwrap();
+        let (frames, cells) = (map.frames(), map.cells());
+        // The next frame's points are new ground, and its class image is not a PNG.
+        let moved: Vec<[f64; 3]> = points.iter().map(|p| [p[0] + 10.0, p[1], p[2]]).collect();
+        let mut bad = frame(moved, Some(classes));
+        bad.class_image = Some(CameraImage {
+            pixels: ImagePixels::Encoded {
+                format: "png".into(),
+                data: vec![1, 2, 3],
+            },
+            pose: Isometry3::identity(),
+            intrinsics: Intrinsics {
+                width: 4,
+                height: 4,
+                fx: 1.0,
+                fy: 1.0,
+                cx: 2.0,
+                cy: 2.0,
+            },
+        });
+        let e = run_fused(&bad, &options, &pipeline, &mut map, false).unwrap_err();
+        assert!(e.to_string().contains("frame.class_image"), "{e}");
+        assert_eq!((map.frames(), map.cells()), (frames, cells));
     }
 
     #[test]
