@@ -526,8 +526,8 @@ impl<K> FusionMap<K> {
     }
 
     /// Adds the classes, view and keep-out footprints of the scan `placed` came from (`scan`,
-    /// whose points must be those given to [`FusionMap::place`]); returns why the map started
-    /// over, if it did.
+    /// whose points must be those given to [`FusionMap::place`]: where it has fewer, its classes
+    /// are ignored); returns why the map started over, if it did.
     pub fn vote(&mut self, placed: Placed, scan: Scan<'_, K>) -> Option<Reset> {
         let Some(origin) = self.origin else {
             return placed.reset;
@@ -742,6 +742,10 @@ impl<K> FusionMap<K> {
         let Some(classes) = scan.classes.filter(|k| k.len() == scan.points.len()) else {
             return;
         };
+        // Not the scan that was placed: its points cannot be told apart from the others'.
+        if keyed.iter().any(|&(_, i)| i as usize >= classes.len()) {
+            return;
+        }
         self.classified = true;
         // Classes that came from no camera are as fine as their source.
         let resolved = scan.view.is_none();
