@@ -8,6 +8,12 @@ use landing_geometry::{
     Triangulator, detect, detect_keeping_out, detect_keeping_out_triangulated, detect_with,
 };
 
+/// `d` with its timings zeroed, for comparing detections.
+fn without_timings(mut d: Detection) -> Detection {
+    d.timings = Default::default();
+    d
+}
+
 /// Runs `detect` and checks every invariant of the result.
 fn run(points: &[[f32; 3]], classes: Option<&[u8]>, params: &Params) -> Detection {
     let d = detect(points, classes, params).expect("detect");
@@ -387,17 +393,15 @@ fn results_are_deterministic_and_triangulator_independent() {
         ..SceneParams::default()
     };
     let s = Scene::generate(&params, 21);
-    let strip = |mut d: Detection| {
-        d.timings = Default::default();
-        d
-    };
-    let a = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
-    let b = strip(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
+    let a = without_timings(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
+    let b = without_timings(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
     assert_eq!(a, b);
     let spade = TriangulationConfig {
         triangulator: Triangulator::Spade,
     };
-    let c = strip(detect_with(&s.points, Some(&s.classes), &Params::default(), &spade).unwrap());
+    let c = without_timings(
+        detect_with(&s.points, Some(&s.classes), &Params::default(), &spade).unwrap(),
+    );
     // Jittered points are in general position: the same Delaunay triangulation, so the same
     // polygons (canonical rings) and radii, whatever the triangle numbering.
     assert_eq!(a.triangle_count, c.triangle_count);
@@ -427,17 +431,14 @@ fn a_triangulation_made_beforehand_gives_the_same_detection() {
         disks: Some(&vent),
         points: Some(&flags),
     };
-    let strip = |mut d: Detection| {
-        d.timings = Default::default();
-        d
-    };
     let params = Params::default();
-    let made =
-        strip(detect_keeping_out(&s.points, Some(&s.classes), &params, keep_clear()).unwrap());
+    let made = without_timings(
+        detect_keeping_out(&s.points, Some(&s.classes), &params, keep_clear()).unwrap(),
+    );
     let wide: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
     let tri = landing_geometry::triangulation::triangulate(&wide, &TriangulationConfig::default())
         .unwrap();
-    let given = strip(
+    let given = without_timings(
         detect_keeping_out_triangulated(
             &s.points,
             tri.clone(),

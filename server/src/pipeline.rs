@@ -207,6 +207,7 @@ pub fn run_pipeline(
     let origin = landing_fusion::centre(&world, frame.cloud.pose.translation.vector.into());
     let c = classify(
         frame,
+        decode(frame, options, pipeline)?,
         &to_local(origin),
         relative_to(&world, origin),
         options,
@@ -304,7 +305,7 @@ pub fn run_fused(
             );
             (placed, surface, world, tri, placing, t.elapsed())
         });
-        let classified = classify_decoded(
+        let classified = classify(
             frame,
             decoded,
             &by,
@@ -414,33 +415,17 @@ struct Classified {
     timings: StageTimings,
 }
 
-/// Decodes the frame's images and classifies its points per the mode and how the frame is
-/// `judged` ([`Judged`]). `world` is the cloud in the coordinates the frame's poses
-/// give once moved by `by` (frame-local ones from the callers above); the frame itself is not
-/// copied.
-fn classify(
-    frame: &Frame,
-    by: &Isometry3<f64>,
-    world: Vec<[f32; 3]>,
-    options: &FrameOptions,
-    pipeline: &Pipeline,
-    judged: Judged,
-) -> Result<Classified, Error> {
-    let decoded = decode(frame, options, pipeline)?;
-    classify_decoded(frame, decoded, by, world, options, pipeline, judged)
-}
-
 /// A frame's images decoded and its mode resolved: what can be wrong with its input is known.
 struct Decoded {
     mode: SegmentationMode,
     image: Option<landing_perception::RgbImage>,
     class_mask: Option<landing_perception::ClassMask>,
-    timings: StageTimings,
+    /// Time spent decoding, when there was an image.
+    time: Option<Duration>,
 }
 
 /// Resolves the frame's mode and decodes its images.
 fn decode(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<Decoded, Error> {
-    let mut timings = StageTimings::default();
     let mode = pipeline.resolve_mode(frame, options.segmentation_mode)?;
     // Every image is decoded, so that a bad one is reported whatever the mode.
     let decode_start = Instant::now();
@@ -450,19 +435,19 @@ fn decode(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<
         .as_ref()
         .map(segmentation::decode_classes)
         .transpose()?;
-    if image.is_some() || class_mask.is_some() {
-        timings.decode = Some(decode_start.elapsed());
-    }
+    let time = (image.is_some() || class_mask.is_some()).then(|| decode_start.elapsed());
     Ok(Decoded {
         mode,
         image,
         class_mask,
-        timings,
+        time,
     })
 }
 
-/// [`classify`] once the frame is [`decode`]d.
-fn classify_decoded(
+/// Classifies the [`decode`]d frame's points per the mode and how the frame is `judged`
+/// ([`Judged`]). `world` is the cloud in the coordinates the frame's poses give once moved by
+/// `by` (frame-local ones from the callers above); the frame itself is not copied.
+fn classify(
     frame: &Frame,
     decoded: Decoded,
     by: &Isometry3<f64>,
@@ -475,8 +460,12 @@ fn classify_decoded(
         mode,
         image,
         class_mask,
-        mut timings,
+        time,
     } = decoded;
+    let mut timings = StageTimings {
+        decode: time,
+        ..StageTimings::default()
+    };
     let decoded = frame.image.as_ref().zip(image.as_ref());
     let class_mask = frame.class_image.as_ref().zip(class_mask.as_ref());
     let landable = &options.params.landable_classes;
