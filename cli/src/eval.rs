@@ -53,6 +53,11 @@ pub struct EvalArgs {
     /// Unset: the server's default.
     #[arg(long)]
     pub polylabel_precision: Option<f64>,
+    /// Judge a circle unsafe when it reaches more than this into an obstacle or off its roof,
+    /// metres. Unset: the declared polylabel precision (the paper's rule). A stricter judge shows
+    /// how far inside the declared tolerance the circles keep.
+    #[arg(long)]
+    pub tolerance: Option<f64>,
     /// At most this many sites per frame. Unset: the server's default.
     #[arg(long)]
     pub max_sites: Option<u32>,
@@ -209,6 +214,7 @@ pub async fn eval_cmd(
             ..Default::default()
         }),
         stream_max_in_flight: args.window as usize,
+        tolerance_m: args.tolerance,
         ..Default::default()
     };
     for s in &mut scenarios {

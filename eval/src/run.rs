@@ -40,8 +40,12 @@ pub struct Scenario {
 pub struct EvalConfig {
     /// Modes compared, in report order.
     pub modes: Vec<Mode>,
-    /// Metric parameters; `tolerance_m` is replaced by the request's polylabel precision.
+    /// Metric parameters; `tolerance_m` is replaced by `tolerance_m` below, else by the
+    /// request's polylabel precision.
     pub metrics: MetricsParams,
+    /// Safety tolerance, metres, when it should be stricter (or looser) than the declared
+    /// polylabel precision, the paper's rule; `None`: the declared precision.
+    pub tolerance_m: Option<f64>,
     /// Pipeline options sent with every frame (the segmentation mode is set per mode).
     pub options: PipelineOptions,
     /// Thickness of the band around a roof's height in which LiDAR points count as hitting the
@@ -69,6 +73,7 @@ impl Default for EvalConfig {
             overlay_all: false,
             stream: None,
             stream_max_in_flight: 4,
+            tolerance_m: None,
         }
     }
 }
@@ -212,9 +217,9 @@ pub async fn run(
     mut progress: impl FnMut(usize, usize),
 ) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), EvalError> {
     let info = client.info().await?;
-    let precision = config
-        .options
-        .polylabel_precision_m
+    let tolerance = config
+        .tolerance_m
+        .or(config.options.polylabel_precision_m)
         .or_else(|| {
             info.default_options
                 .as_ref()
@@ -222,7 +227,7 @@ pub async fn run(
         })
         .unwrap_or(config.metrics.tolerance_m);
     let params = MetricsParams {
-        tolerance_m: precision,
+        tolerance_m: tolerance,
         ..config.metrics.clone()
     };
     let passes = if config.stream.is_some() { 2 } else { 1 };

@@ -328,6 +328,33 @@ fn parameters_are_validated_with_field_names() {
     Params::default().validate().unwrap();
 }
 
+/// The parameters the service sets for fused streams (no `PipelineOptions` field) are checked too.
+#[test]
+fn fused_stream_parameters_out_of_range_are_refused_by_name() {
+    let cases = [
+        (
+            "midpoint_max_edge_m",
+            Params {
+                midpoint_max_edge_m: f64::INFINITY,
+                ..Params::default()
+            },
+        ),
+        (
+            "keep_out_trust_edge_m",
+            Params {
+                keep_out_trust_edge_m: -0.3,
+                ..Params::default()
+            },
+        ),
+    ];
+    for (field, params) in cases {
+        match detect(&[], None, &params) {
+            Err(GeometryError::InvalidParameter { field: f, .. }) => assert_eq!(f, field),
+            other => panic!("{field}: {other:?}"),
+        }
+    }
+}
+
 #[test]
 fn filters_and_limits() {
     let params = SceneParams {
