@@ -1046,6 +1046,23 @@ mod tests {
     }
 
     #[test]
+    fn eval_tolerance_is_a_distance() {
+        let parse =
+            |t: &str| Cli::try_parse_from(["landing", "eval", "dir", &format!("--tolerance={t}")]);
+        let Command::Eval(a) = parse("0.15").unwrap().command else {
+            panic!("not eval")
+        };
+        assert_eq!(a.tolerance, Some(0.15));
+        for bad in ["-0.1", "NaN", "inf", "wide"] {
+            let e = parse(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("--tolerance") && e.contains("metres"),
+                "{bad}: {e}"
+            );
+        }
+    }
+
+    #[test]
     fn class_image_mode_sends_the_recorded_labels() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
         let args = |input: &str| {

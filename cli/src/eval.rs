@@ -56,7 +56,7 @@ pub struct EvalArgs {
     /// Judge a circle unsafe when it reaches more than this into an obstacle or off its roof,
     /// metres. Unset: the declared polylabel precision (the paper's rule). A stricter judge shows
     /// how far inside the declared tolerance the circles keep.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_tolerance)]
     pub tolerance: Option<f64>,
     /// At most this many sites per frame. Unset: the server's default.
     #[arg(long)]
@@ -158,6 +158,13 @@ fn generate_scenarios(
 
 fn parse_mode(s: &str) -> Result<Mode, String> {
     Mode::parse(s).ok_or_else(|| format!("unknown mode `{s}` (expected geometry, model or truth)"))
+}
+
+fn parse_tolerance(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a distance in metres (finite, >= 0)")),
+    }
 }
 
 /// Runs `landing eval`: prints the table (or JSON), writes the report folder, and returns
