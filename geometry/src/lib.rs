@@ -393,10 +393,20 @@ pub fn detect_keeping_out(
     )
 }
 
+/// The triangulation [`detect_keeping_out`] makes of `points`, for
+/// [`detect_keeping_out_triangulated`]: made beforehand, say on another thread while the
+/// points' classes are still being made.
+pub fn triangulate_points(points: &[[f32; 3]]) -> Result<Triangulation, GeometryError> {
+    triangulation::triangulate(&widen(points), &TriangulationConfig::default())
+}
+
+/// `points` in the double precision the geometry works in.
+fn widen(points: &[[f32; 3]]) -> Vec<[f64; 3]> {
+    points.iter().map(|p| p.map(f64::from)).collect()
+}
+
 /// [`detect_keeping_out`] on points already triangulated: `tri` must be
-/// [`triangulation::triangulate`] of `points` (their x/y widened to `f64`), made beforehand,
-/// say on another thread while their classes were still being made; its time is the caller's
-/// and reported as zero. A triangulation that names a point `points` lacks gives
+/// [`triangulate_points`] of `points`; its time is the caller's and reported as zero. A triangulation that names a point `points` lacks gives
 /// [`GeometryError::InvalidMesh`].
 pub fn detect_keeping_out_triangulated(
     points: &[[f32; 3]],
@@ -443,10 +453,7 @@ fn run(
             flags: flags.len(),
         });
     }
-    let pts: Vec<[f64; 3]> = points
-        .iter()
-        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-        .collect();
+    let pts = widen(points);
     let mut timings = StepTimings::default();
 
     let t0 = Instant::now();

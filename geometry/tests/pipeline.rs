@@ -462,9 +462,7 @@ fn a_triangulation_made_beforehand_gives_the_same_detection() {
     let made = without_timings(
         detect_keeping_out(&s.points, Some(&s.classes), &params, keep_clear()).unwrap(),
     );
-    let wide: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
-    let tri = landing_geometry::triangulation::triangulate(&wide, &TriangulationConfig::default())
-        .unwrap();
+    let tri = landing_geometry::triangulate_points(&s.points).unwrap();
     let given = without_timings(
         detect_keeping_out_triangulated(
             &s.points,

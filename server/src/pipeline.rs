@@ -7,7 +7,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use landing_fusion::{Correction, FusionMap, NotRegistered, Scan, View};
-use landing_geometry::{Disk, KeepClear, Params, Triangulation, TriangulationConfig};
+use landing_geometry::{Disk, KeepClear, Params, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
@@ -230,10 +230,10 @@ pub fn run_pipeline(
 /// Runs the pipeline on a fused stream's frame: the frame's points are added to the stream's
 /// `map` and its top surface triangulated on a second thread while the frame is classified
 /// ([`Judged::InStream`]), its classes then vote, and the answer is computed from all the map's
-/// points (what the approach has
-/// scanned so far), keeping clear of the keep-out footprints of every frame the map remembers,
-/// with the pinholes of its dense planes closed (`Params::close_pinholes`) and its polygons'
-/// edges halfway to the first point that is not theirs (`Params::midpoint_max_edge_m`).
+/// points (what the approach has scanned so far), keeping clear of the keep-out footprints of
+/// every frame the map remembers, with the pinholes of its dense planes closed
+/// (`Params::close_pinholes`) and its polygons' edges halfway to the first point that is not
+/// theirs (`Params::midpoint_max_edge_m`).
 /// `reset` starts the map over first. A frame without a timestamp counts as taken at the
 /// previous frame's time. The frame-local coordinates are the map's own (its origin), so that
 /// the keep-out footprints of every kept frame share them.
@@ -299,10 +299,7 @@ pub fn run_fused(
             let world = relative_to(&surface.points, origin);
             let placing = t.elapsed();
             let t = Instant::now();
-            let tri = landing_geometry::triangulation::triangulate(
-                &widen(&world),
-                &TriangulationConfig::default(),
-            );
+            let tri = landing_geometry::triangulate_points(&world);
             (placed, surface, world, tri, placing, t.elapsed())
         });
         let classified = classify(
@@ -387,11 +384,6 @@ pub fn run_fused(
 /// The move from world coordinates to those relative to `origin`.
 fn to_local(origin: [f64; 3]) -> Isometry3<f64> {
     Isometry3::translation(-origin[0], -origin[1], -origin[2])
-}
-
-/// `points` widened to the double precision the geometry triangulates in.
-fn widen(points: &[[f32; 3]]) -> Vec<[f64; 3]> {
-    points.iter().map(|p| p.map(f64::from)).collect()
 }
 
 /// `points` relative to `origin`, in the single precision the geometry takes.
