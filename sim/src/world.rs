@@ -762,6 +762,7 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
     }
 }
 
+/// The ribbed sheet metal of AC units and air ducts.
 fn sheet_metal(rng: &mut SmallRng) -> Material {
     material(rng, [0.72, 0.73, 0.75], Texture::Metal)
 }
