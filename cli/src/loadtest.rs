@@ -8,7 +8,9 @@ use std::time::{Duration, Instant};
 
 use landing_proto::v1::Frame;
 
-use landing_client::{ClientError, FrameOutcome, LandingClient, StreamConfig};
+use landing_client::{
+    ClientError, FrameOutcome, FrameSender, LandingClient, StreamConfig, StreamItem,
+};
 
 /// What to run.
 #[derive(Debug, Clone)]
@@ -110,6 +112,7 @@ impl LoadTestReport {
     }
 }
 
+/// What one stream (or all of them) sent and got back.
 #[derive(Default)]
 struct StreamTally {
     sent: u64,
@@ -123,6 +126,80 @@ struct StreamTally {
     errors: Vec<String>,
 }
 
+impl StreamTally {
+    /// Adds another stream's tally to this one.
+    fn merge(&mut self, t: StreamTally) {
+        self.sent += t.sent;
+        self.answered += t.answered;
+        for (k, v) in t.outcomes {
+            *self.outcomes.entry(k).or_default() += v;
+        }
+        self.unanswered += t.unanswered;
+        self.unexpected += t.unexpected;
+        self.ok_latency.extend(t.ok_latency);
+        self.all_latency.extend(t.all_latency);
+        self.sites += t.sites;
+        self.errors.extend(t.errors);
+    }
+
+    /// Counts one item of stream `stream_index`: an answer, or how the stream broke.
+    fn record(&mut self, stream_index: usize, item: Result<StreamItem, ClientError>) {
+        match item {
+            Ok(item) => {
+                self.answered += 1;
+                let ms = item.latency.as_secs_f64() * 1e3;
+                self.all_latency.push(ms);
+                if let FrameOutcome::Result(r) = &item.outcome {
+                    self.ok_latency.push(ms);
+                    self.sites += r.sites.len() as u64;
+                }
+                *self.outcomes.entry(item.outcome.label()).or_default() += 1;
+            }
+            Err(ClientError::StreamBroken { unanswered, status }) => {
+                self.unanswered += unanswered.len() as u64;
+                self.errors.push(format!(
+                    "stream {stream_index}: {} frame(s) unanswered{}",
+                    unanswered.len(),
+                    status.map(|s| format!(" ({s})")).unwrap_or_default()
+                ));
+            }
+            Err(ClientError::Protocol(m)) => {
+                self.unexpected += 1;
+                self.errors.push(format!("stream {stream_index}: {m}"));
+            }
+            Err(e) => self.errors.push(format!("stream {stream_index}: {e}")),
+        }
+    }
+
+    /// The report of the whole run, which took `elapsed_s`.
+    fn report(self, config: &LoadTestConfig, elapsed_s: f64) -> LoadTestReport {
+        let ok = self.outcomes.get("ok").copied().unwrap_or(0);
+        LoadTestReport {
+            streams: config.streams,
+            rate_hz_per_stream: config.rate_hz,
+            elapsed_s,
+            sent: self.sent,
+            answered: self.answered,
+            outcomes: self.outcomes,
+            unanswered: self.unanswered,
+            unexpected: self.unexpected,
+            throughput_fps: if elapsed_s > 0.0 {
+                ok as f64 / elapsed_s
+            } else {
+                0.0
+            },
+            latency_ms: Percentiles::of(&self.ok_latency),
+            all_latency_ms: Percentiles::of(&self.all_latency),
+            mean_sites: if ok > 0 {
+                self.sites as f64 / ok as f64
+            } else {
+                0.0
+            },
+            stream_errors: self.errors,
+        }
+    }
+}
+
 /// Runs the load test. `frames` are replayed in a loop by every stream with fresh sequence
 /// numbers. `progress` is called about once a second with (answered so far, elapsed).
 pub async fn run_load_test(
@@ -131,6 +208,41 @@ pub async fn run_load_test(
     config: &LoadTestConfig,
     progress: Option<&(dyn Fn(u64, Duration) + Sync)>,
 ) -> Result<LoadTestReport, ClientError> {
+    check_input(&frames, config)?;
+    let answered = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let started = Instant::now();
+    let mut tasks = Vec::with_capacity(config.streams);
+    for stream_index in 0..config.streams {
+        let client = client.clone();
+        let frames = frames.clone();
+        let config = config.clone();
+        let answered = answered.clone();
+        tasks.push(tokio::spawn(async move {
+            one_stream(client, frames, config, stream_index, answered, started).await
+        }));
+    }
+    let mut all = StreamTally::default();
+    let mut joined = std::pin::pin!(futures_join(tasks));
+    loop {
+        tokio::select! {
+            done = &mut joined => {
+                for t in done {
+                    all.merge(t.map_err(|e| ClientError::Protocol(format!("load-test task failed: {e}")))?);
+                }
+                break;
+            }
+            _ = tokio::time::sleep(Duration::from_secs(1)) => {
+                if let Some(p) = progress {
+                    p(answered.load(std::sync::atomic::Ordering::Relaxed), started.elapsed());
+                }
+            }
+        }
+    }
+    Ok(all.report(config, started.elapsed().as_secs_f64()))
+}
+
+/// Refuses a run without frames, without streams or with a rate that is not a positive number.
+fn check_input(frames: &[Frame], config: &LoadTestConfig) -> Result<(), ClientError> {
     if frames.is_empty() {
         return Err(ClientError::InvalidInput {
             field: "frames",
@@ -151,71 +263,7 @@ pub async fn run_load_test(
             reason: format!("{r} is not a positive rate"),
         });
     }
-    let answered = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    let started = Instant::now();
-    let mut tasks = Vec::with_capacity(config.streams);
-    for stream_index in 0..config.streams {
-        let client = client.clone();
-        let frames = frames.clone();
-        let config = config.clone();
-        let answered = answered.clone();
-        tasks.push(tokio::spawn(async move {
-            one_stream(client, frames, config, stream_index, answered, started).await
-        }));
-    }
-    let mut all = StreamTally::default();
-    let mut joined = std::pin::pin!(futures_join(tasks));
-    loop {
-        tokio::select! {
-            done = &mut joined => {
-                for t in done {
-                    let t = t.map_err(|e| ClientError::Protocol(format!("load-test task failed: {e}")))?;
-                    all.sent += t.sent;
-                    all.answered += t.answered;
-                    for (k, v) in t.outcomes {
-                        *all.outcomes.entry(k).or_default() += v;
-                    }
-                    all.unanswered += t.unanswered;
-                    all.unexpected += t.unexpected;
-                    all.ok_latency.extend(t.ok_latency);
-                    all.all_latency.extend(t.all_latency);
-                    all.sites += t.sites;
-                    all.errors.extend(t.errors);
-                }
-                break;
-            }
-            _ = tokio::time::sleep(Duration::from_secs(1)) => {
-                if let Some(p) = progress {
-                    p(answered.load(std::sync::atomic::Ordering::Relaxed), started.elapsed());
-                }
-            }
-        }
-    }
-    let elapsed = started.elapsed().as_secs_f64();
-    let ok = all.outcomes.get("ok").copied().unwrap_or(0);
-    Ok(LoadTestReport {
-        streams: config.streams,
-        rate_hz_per_stream: config.rate_hz,
-        elapsed_s: elapsed,
-        sent: all.sent,
-        answered: all.answered,
-        outcomes: all.outcomes,
-        unanswered: all.unanswered,
-        unexpected: all.unexpected,
-        throughput_fps: if elapsed > 0.0 {
-            ok as f64 / elapsed
-        } else {
-            0.0
-        },
-        latency_ms: Percentiles::of(&all.ok_latency),
-        all_latency_ms: Percentiles::of(&all.all_latency),
-        mean_sites: if ok > 0 {
-            all.sites as f64 / ok as f64
-        } else {
-            0.0
-        },
-        stream_errors: all.errors,
-    })
+    Ok(())
 }
 
 /// Awaits every task, in order.
@@ -229,6 +277,7 @@ async fn futures_join<T>(
     out
 }
 
+/// One stream of the load test: sends on its own task while this one counts the answers.
 async fn one_stream(
     client: LandingClient,
     frames: Arc<Vec<Frame>>,
@@ -237,73 +286,22 @@ async fn one_stream(
     answered: Arc<std::sync::atomic::AtomicU64>,
     started: Instant,
 ) -> StreamTally {
-    let (mut sender, mut results) = client.open_stream(config.stream.clone());
+    let (sender, mut results) = client.open_stream(config.stream.clone());
     let drone = format!("loadtest-{stream_index}");
-    let duration = config.duration;
-    let rate = config.rate_hz;
-    let send_task = tokio::spawn(async move {
-        let mut sent = 0u64;
-        let mut ticker = rate.map(|r| {
-            let mut i = tokio::time::interval(Duration::from_secs_f64(1.0 / r));
-            i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
-            i
-        });
-        let mut error = None;
-        while started.elapsed() < duration {
-            if let Some(t) = ticker.as_mut() {
-                t.tick().await;
-                if started.elapsed() >= duration {
-                    break;
-                }
-            }
-            let mut frame = frames[(sent % frames.len() as u64) as usize].clone();
-            frame.sequence = sent;
-            frame.drone_id = drone.clone();
-            // A full window blocks here until answers come back: the back-pressure under test.
-            let send = tokio::time::timeout(
-                duration.saturating_sub(started.elapsed()) + Duration::from_millis(1),
-                sender.send(frame),
-            );
-            match send.await {
-                Ok(Ok(())) => sent += 1,
-                Ok(Err(e)) => {
-                    error = Some(e.to_string());
-                    break;
-                }
-                Err(_) => break,
-            }
-        }
-        sender.finish();
-        (sent, error)
-    });
+    let send_task = tokio::spawn(send_frames(
+        sender,
+        frames,
+        drone,
+        config.rate_hz,
+        started,
+        config.duration,
+    ));
     let mut tally = StreamTally::default();
     while let Some(item) = results.next().await {
-        match item {
-            Ok(item) => {
-                tally.answered += 1;
-                answered.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                let ms = item.latency.as_secs_f64() * 1e3;
-                tally.all_latency.push(ms);
-                if let FrameOutcome::Result(r) = &item.outcome {
-                    tally.ok_latency.push(ms);
-                    tally.sites += r.sites.len() as u64;
-                }
-                *tally.outcomes.entry(item.outcome.label()).or_default() += 1;
-            }
-            Err(ClientError::StreamBroken { unanswered, status }) => {
-                tally.unanswered += unanswered.len() as u64;
-                tally.errors.push(format!(
-                    "stream {stream_index}: {} frame(s) unanswered{}",
-                    unanswered.len(),
-                    status.map(|s| format!(" ({s})")).unwrap_or_default()
-                ));
-            }
-            Err(ClientError::Protocol(m)) => {
-                tally.unexpected += 1;
-                tally.errors.push(format!("stream {stream_index}: {m}"));
-            }
-            Err(e) => tally.errors.push(format!("stream {stream_index}: {e}")),
+        if item.is_ok() {
+            answered.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }
+        tally.record(stream_index, item);
     }
     match send_task.await {
         Ok((sent, error)) => {
@@ -319,6 +317,52 @@ async fn one_stream(
             .push(format!("stream {stream_index}: sender task failed: {e}")),
     }
     tally
+}
+
+/// Replays `frames` in a loop as drone `drone`, with fresh sequence numbers, at `rate` frames
+/// per second (as fast as the window allows when `None`) until `duration` after `started`; then
+/// finishes the stream. Returns the frames sent and the error that stopped sending, if any.
+async fn send_frames(
+    mut sender: FrameSender,
+    frames: Arc<Vec<Frame>>,
+    drone: String,
+    rate: Option<f64>,
+    started: Instant,
+    duration: Duration,
+) -> (u64, Option<String>) {
+    let mut sent = 0u64;
+    let mut ticker = rate.map(|r| {
+        let mut i = tokio::time::interval(Duration::from_secs_f64(1.0 / r));
+        i.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+        i
+    });
+    let mut error = None;
+    while started.elapsed() < duration {
+        if let Some(t) = ticker.as_mut() {
+            t.tick().await;
+            if started.elapsed() >= duration {
+                break;
+            }
+        }
+        let mut frame = frames[(sent % frames.len() as u64) as usize].clone();
+        frame.sequence = sent;
+        frame.drone_id = drone.clone();
+        // A full window blocks here until answers come back: the back-pressure under test.
+        let send = tokio::time::timeout(
+            duration.saturating_sub(started.elapsed()) + Duration::from_millis(1),
+            sender.send(frame),
+        );
+        match send.await {
+            Ok(Ok(())) => sent += 1,
+            Ok(Err(e)) => {
+                error = Some(e.to_string());
+                break;
+            }
+            Err(_) => break,
+        }
+    }
+    sender.finish();
+    (sent, error)
 }
 
 #[cfg(test)]

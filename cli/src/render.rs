@@ -3,7 +3,7 @@
 //! and a star at its centre; next to it the same from above.
 
 use image::{Rgb, RgbImage};
-use landing_proto::v1::{Frame, FrameResult, LinearRing, camera_image};
+use landing_proto::v1::{Frame, FrameResult, LandingSite, LinearRing, camera_image};
 
 use landing_client::{ClientError, RigidTransform, unpack_point_cloud};
 
@@ -125,31 +125,7 @@ pub fn render(
 
     let (background, camera) = match frame.image.as_ref() {
         Some(img) => {
-            let mut pixels = decode_camera_image(img)?;
-            // Small sensor images are enlarged by a whole factor to the panel height, so that
-            // both panels are about the same size; the intrinsics scale with them.
-            let k = (config.top_down_px / pixels.height().max(1)).max(1);
-            if k > 1 {
-                pixels = image::imageops::resize(
-                    &pixels,
-                    pixels.width() * k,
-                    pixels.height() * k,
-                    image::imageops::FilterType::Nearest,
-                );
-            }
-            let calib = img.calibration.unwrap_or_default();
-            let pose = img.pose.unwrap_or_default();
-            let k = k as f64;
-            let view = CameraView {
-                camera_from_world: RigidTransform::from_pose(&pose).inverse(),
-                fx: calib.fx * k,
-                fy: calib.fy * k,
-                // Pixel i covers [i, i + 1), as where points are drawn, so the scale is plain.
-                cx: calib.cx * k,
-                cy: calib.cy * k,
-                width: pixels.width(),
-                height: pixels.height(),
-            };
+            let (pixels, view) = camera_panel(img, config.top_down_px)?;
             (Some(pixels), Some(view))
         }
         None => (None, None),
@@ -162,72 +138,151 @@ pub fn render(
     if let Some(bg) = &background {
         image::imageops::replace(&mut canvas, bg, 0, 0);
     }
+    let top = top_view(&sites, &world, cam_w, config.top_down_px);
 
-    // The top-down view frames the sites and the points near them, so a far-away ground return
-    // does not shrink the roof to a few pixels.
+    draw_points(&mut canvas, &world, camera.as_ref(), &top, cam_w);
+    // Sites, worst first so the best is drawn on top.
+    for site in sites.iter().rev() {
+        let Some(shape) = SiteShape::of(site) else {
+            continue;
+        };
+        let panels: [(Projector<'_>, u32, u32); 2] = [
+            (&|w| camera.as_ref().and_then(|c| c.project(w)), 0, cam_w),
+            (&|w| Some(top.project(w)), cam_w, cam_w + top.size),
+        ];
+        for (project, x_lo, x_hi) in panels {
+            if x_hi == x_lo {
+                continue;
+            }
+            shape.draw(&mut canvas, project, config.fill_alpha, x_lo, x_hi);
+        }
+    }
+    Ok(Rendered {
+        image: canvas,
+        camera,
+        top,
+    })
+}
+
+/// The camera image for the left panel and how world points project into it.
+fn camera_panel(
+    img: &landing_proto::v1::CameraImage,
+    top_down_px: u32,
+) -> Result<(RgbImage, CameraView), ClientError> {
+    let mut pixels = decode_camera_image(img)?;
+    // Small sensor images are enlarged by a whole factor to the panel height, so that
+    // both panels are about the same size; the intrinsics scale with them.
+    let k = (top_down_px / pixels.height().max(1)).max(1);
+    if k > 1 {
+        pixels = image::imageops::resize(
+            &pixels,
+            pixels.width() * k,
+            pixels.height() * k,
+            image::imageops::FilterType::Nearest,
+        );
+    }
+    let calib = img.calibration.unwrap_or_default();
+    let pose = img.pose.unwrap_or_default();
+    let k = k as f64;
+    let view = CameraView {
+        camera_from_world: RigidTransform::from_pose(&pose).inverse(),
+        fx: calib.fx * k,
+        fy: calib.fy * k,
+        // Pixel i covers [i, i + 1), as where points are drawn, so the scale is plain.
+        cx: calib.cx * k,
+        cy: calib.cy * k,
+        width: pixels.width(),
+        height: pixels.height(),
+    };
+    Ok((pixels, view))
+}
+
+/// The top-down panel, `size` pixels square at column `offset_x`. It frames the sites and the
+/// points near them, so a far-away ground return does not shrink the roof to a few pixels.
+fn top_view(sites: &[&LandingSite], world: &[[f64; 3]], offset_x: u32, size: u32) -> TopView {
     let mut xs: Vec<f64> = Vec::new();
     let mut ys: Vec<f64> = Vec::new();
-    for s in &sites {
+    for s in sites {
         if let Some(shell) = s.polygon.as_ref().and_then(|p| p.shell.as_ref()) {
             xs.extend(shell.points.iter().map(|p| p.x));
             ys.extend(shell.points.iter().map(|p| p.y));
         }
     }
     if xs.is_empty() {
-        let mut px: Vec<f64> = world.iter().map(|p| p[0]).collect();
-        let mut py: Vec<f64> = world.iter().map(|p| p[1]).collect();
-        px.sort_by(f64::total_cmp);
-        py.sort_by(f64::total_cmp);
-        if !px.is_empty() {
-            let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f) as usize];
-            xs = vec![q(&px, 0.02), q(&px, 0.98)];
-            ys = vec![q(&py, 0.02), q(&py, 0.98)];
-        } else {
-            xs = vec![-10.0, 10.0];
-            ys = vec![-10.0, 10.0];
-        }
+        (xs, ys) = central_extent(world);
     }
     let (x0, x1) = min_max(&xs);
     let (y0, y1) = min_max(&ys);
     let span = (x1 - x0).max(y1 - y0).max(4.0) * 1.25;
     let centre = [(x0 + x1) / 2.0, (y0 + y1) / 2.0];
-    let top = TopView {
-        offset_x: cam_w,
-        size: config.top_down_px,
+    TopView {
+        offset_x,
+        size,
         min: [centre[0] - span / 2.0, centre[1] - span / 2.0],
-        scale: config.top_down_px as f64 / span,
-    };
+        scale: size as f64 / span,
+    }
+}
 
-    // Points: height-coloured dots.
+/// The 2nd and 98th percentiles of the points' x and y (a 20 m square at the origin without
+/// points), for a frame without sites.
+fn central_extent(world: &[[f64; 3]]) -> (Vec<f64>, Vec<f64>) {
+    let mut px: Vec<f64> = world.iter().map(|p| p[0]).collect();
+    let mut py: Vec<f64> = world.iter().map(|p| p[1]).collect();
+    px.sort_by(f64::total_cmp);
+    py.sort_by(f64::total_cmp);
+    if px.is_empty() {
+        return (vec![-10.0, 10.0], vec![-10.0, 10.0]);
+    }
+    let q = |v: &[f64], f: f64| v[((v.len() - 1) as f64 * f) as usize];
+    (
+        vec![q(&px, 0.02), q(&px, 0.98)],
+        vec![q(&py, 0.02), q(&py, 0.98)],
+    )
+}
+
+/// The points as height-coloured dots in both panels.
+fn draw_points(
+    canvas: &mut RgbImage,
+    world: &[[f64; 3]],
+    camera: Option<&CameraView>,
+    top: &TopView,
+    cam_w: u32,
+) {
     let (z0, z1) = min_max(&world.iter().map(|p| p[2]).collect::<Vec<_>>());
-    for p in &world {
+    for p in world {
         let t = if z1 > z0 {
             ((p[2] - z0) / (z1 - z0)) as f32
         } else {
             0.5
         };
         let c = height_colour(t);
-        if let Some(cam) = &camera
+        if let Some(cam) = camera
             && let Some((u, v)) = cam.project(*p)
         {
-            put(&mut canvas, u, v, c, 0, cam_w);
+            put(canvas, u, v, c, 0, cam_w);
         }
         let (u, v) = top.project(*p);
-        put_panel(&mut canvas, u, v, c, cam_w, cam_w + top.size);
+        put_panel(canvas, u, v, c, cam_w, cam_w + top.size);
     }
+}
 
-    // Sites, worst first so the best is drawn on top.
-    for site in sites.iter().rev() {
-        let Some(poly) = site.polygon.as_ref() else {
-            continue;
-        };
+/// A landing site in world coordinates: its polygon, safe circle and centre.
+struct SiteShape {
+    shell: Vec<[f64; 3]>,
+    holes: Vec<Vec<[f64; 3]>>,
+    circle: Vec<[f64; 3]>,
+    centre: [f64; 3],
+}
+
+impl SiteShape {
+    /// The shape of `site`, or `None` when it has no polygon.
+    fn of(site: &LandingSite) -> Option<Self> {
+        let poly = site.polygon.as_ref()?;
         let ring3 = |r: &LinearRing| -> Vec<[f64; 3]> {
             r.points.iter().map(|p| [p.x, p.y, p.z]).collect()
         };
-        let shell = poly.shell.as_ref().map(ring3).unwrap_or_default();
-        let holes: Vec<Vec<[f64; 3]>> = poly.holes.iter().map(ring3).collect();
         let centre = site.center.map(|c| [c.x, c.y, c.z]).unwrap_or([0.0; 3]);
-        let circle: Vec<[f64; 3]> = (0..72)
+        let circle = (0..72)
             .map(|k| {
                 let a = k as f64 / 72.0 * std::f64::consts::TAU;
                 [
@@ -237,54 +292,57 @@ pub fn render(
                 ]
             })
             .collect();
-        let panels: [(Projector<'_>, u32, u32); 2] = [
-            (&|w| camera.as_ref().and_then(|c| c.project(w)), 0, cam_w),
-            (&|w| Some(top.project(w)), cam_w, cam_w + top.size),
-        ];
-        for (project, x_lo, x_hi) in panels {
-            let proj = |ring: &[[f64; 3]]| -> Option<Vec<(f64, f64)>> {
-                ring.iter().map(|p| project(*p)).collect()
-            };
-            if x_hi == x_lo {
-                continue;
-            }
-            if let Some(s) = proj(&shell) {
-                fill_polygon(
-                    &mut canvas,
-                    std::slice::from_ref(&s),
-                    POLYGON_GREEN,
-                    config.fill_alpha,
-                    x_lo,
-                    x_hi,
-                );
-                polyline(&mut canvas, &s, true, POLYGON_GREEN, x_lo, x_hi);
-            }
-            for h in &holes {
-                if let Some(h) = proj(h) {
-                    fill_polygon(
-                        &mut canvas,
-                        std::slice::from_ref(&h),
-                        HOLE_ORANGE,
-                        0.8,
-                        x_lo,
-                        x_hi,
-                    );
-                    polyline(&mut canvas, &h, true, HOLE_ORANGE, x_lo, x_hi);
-                }
-            }
-            if let Some(c) = proj(&circle) {
-                polyline(&mut canvas, &c, true, CIRCLE_BLUE, x_lo, x_hi);
-            }
-            if let Some((u, v)) = project(centre) {
-                star(&mut canvas, u, v, 9.0, x_lo, x_hi);
+        Some(Self {
+            shell: poly.shell.as_ref().map(ring3).unwrap_or_default(),
+            holes: poly.holes.iter().map(ring3).collect(),
+            circle,
+            centre,
+        })
+    }
+
+    /// Draws the shape into the panel at columns `x_lo..x_hi`: the polygon filled green, its
+    /// holes orange, the circle outlined blue and a star at the centre. A ring with a point the
+    /// panel cannot show is left out.
+    fn draw(
+        &self,
+        canvas: &mut RgbImage,
+        project: Projector<'_>,
+        alpha: f32,
+        x_lo: u32,
+        x_hi: u32,
+    ) {
+        let proj = |ring: &[[f64; 3]]| -> Option<Vec<(f64, f64)>> {
+            ring.iter().map(|p| project(*p)).collect()
+        };
+        if let Some(s) = proj(&self.shell) {
+            filled_ring(canvas, s, POLYGON_GREEN, alpha, x_lo, x_hi);
+        }
+        for h in &self.holes {
+            if let Some(h) = proj(h) {
+                filled_ring(canvas, h, HOLE_ORANGE, 0.8, x_lo, x_hi);
             }
         }
+        if let Some(c) = proj(&self.circle) {
+            polyline(canvas, &c, true, CIRCLE_BLUE, x_lo, x_hi);
+        }
+        if let Some((u, v)) = project(self.centre) {
+            star(canvas, u, v, 9.0, x_lo, x_hi);
+        }
     }
-    Ok(Rendered {
-        image: canvas,
-        camera,
-        top,
-    })
+}
+
+/// One ring filled with `c` at opacity `alpha` and outlined in `c`.
+fn filled_ring(
+    canvas: &mut RgbImage,
+    ring: Vec<(f64, f64)>,
+    c: Rgb<u8>,
+    alpha: f32,
+    x_lo: u32,
+    x_hi: u32,
+) {
+    let rings = [ring];
+    fill_polygon(canvas, &rings, c, alpha, x_lo, x_hi);
+    polyline(canvas, &rings[0], true, c, x_lo, x_hi);
 }
 
 /// Decodes the frame's camera image to RGB8.
@@ -458,7 +516,7 @@ mod tests {
     use landing_client::{
         FrameBuilder, ImageData, PointCloudBuilder, camera_image, intrinsics_from_fov, pose,
     };
-    use landing_proto::v1::{LandingSite, Polygon, Vector3};
+    use landing_proto::v1::{Polygon, Vector3};
 
     fn v(x: f64, y: f64, z: f64) -> Vector3 {
         Vector3 { x, y, z }

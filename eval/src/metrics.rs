@@ -294,79 +294,113 @@ pub fn evaluate_frame(sites: &[Site], roofs: &[RoofTruth], params: &MetricsParam
         let on_roof: Vec<usize> = (0..sites.len())
             .filter(|&k| out.sites[k].roof == Some(ri))
             .collect();
-        // The grid holds the roof and every polygon matched to it, so spill-over counts as error.
-        let mut pts: Vec<P2> = roof.outline.shell.clone();
-        for &k in &on_roof {
-            pts.extend(sites[k].polygon.shell.iter().copied());
-        }
-        let Some((lo, hi)) = crate::geom::bounds_of(&pts) else {
+        let matched: Vec<&Site> = on_roof.iter().map(|&k| &sites[k]).collect();
+        let Some(grid) = roof_grid(roof, &matched, params.cell_m) else {
             continue;
         };
-        let Some(grid) = Grid::covering(lo, hi, params.cell_m, 2.0 * params.cell_m) else {
-            continue;
-        };
-        let truth = landable_mask(grid, roof);
         let mut returned = Mask::empty(grid);
-        for &k in &on_roof {
-            returned.add_polygon(&sites[k].polygon);
+        for s in &matched {
+            returned.add_polygon(&s.polygon);
         }
-        let scanned = match &roof.scanned {
-            Some(s) => Mask::of_polygon(grid, s),
-            None => Mask::of_polygon(grid, &roof.outline),
-        };
-        for o in &roof.obstacles {
-            let mut fp = Mask::of_polygon(grid, &o.footprint);
-            fp.and(&scanned);
-            let n = fp.count();
-            if (n as f64) * grid.cell_area() < params.min_obstacle_area_m2 {
-                continue;
-            }
-            let hit = on_roof.iter().any(|&k| {
-                let s = &sites[k];
-                s.radius_m + o.footprint.signed_distance(s.center) > params.tolerance_m
-            });
-            out.obstacles.push(ObstacleEval {
-                roof: ri,
-                class: o.class,
-                scanned_area_m2: n as f64 * grid.cell_area(),
-                covered_fraction: fp.intersection_count(&returned) as f64 / n as f64,
-                hit,
-            });
-        }
-        let truth_radius = truth.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
-        if !roof.scored || truth_radius < params.min_truth_radius_m {
-            continue;
-        }
-        let mut visible = truth.clone();
-        visible.and_not(&hidden_mask(grid, roof));
-        let visible_radius = visible.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
+        out.obstacles
+            .extend(obstacle_evals(ri, roof, grid, &returned, &matched, params));
         let best_safe = on_roof
             .iter()
             .filter(|&&k| out.sites[k].verdict.is_safe())
             .map(|&k| sites[k].radius_m)
             .fold(0.0f64, f64::max);
-        out.roofs.push(RoofEval {
+        out.roofs
+            .extend(roof_eval(ri, roof, grid, &returned, best_safe, params));
+    }
+    out
+}
+
+/// The grid of cells `cell_m` wide over the roof and every polygon matched to it, so that
+/// spill-over counts as error; `None` when there is nothing to cover.
+fn roof_grid(roof: &RoofTruth, matched: &[&Site], cell_m: f64) -> Option<Grid> {
+    let mut pts: Vec<P2> = roof.outline.shell.clone();
+    for s in matched {
+        pts.extend(s.polygon.shell.iter().copied());
+    }
+    let (lo, hi) = crate::geom::bounds_of(&pts)?;
+    Grid::covering(lo, hi, cell_m, 2.0 * cell_m)
+}
+
+/// The scanned obstacles of roof `ri` big enough to count: how much of each the `returned`
+/// polygons cover, and whether a matched site's circle reaches into it.
+fn obstacle_evals(
+    ri: usize,
+    roof: &RoofTruth,
+    grid: Grid,
+    returned: &Mask,
+    matched: &[&Site],
+    params: &MetricsParams,
+) -> Vec<ObstacleEval> {
+    let scanned = match &roof.scanned {
+        Some(s) => Mask::of_polygon(grid, s),
+        None => Mask::of_polygon(grid, &roof.outline),
+    };
+    let mut out = Vec::new();
+    for o in &roof.obstacles {
+        let mut fp = Mask::of_polygon(grid, &o.footprint);
+        fp.and(&scanned);
+        let n = fp.count();
+        if (n as f64) * grid.cell_area() < params.min_obstacle_area_m2 {
+            continue;
+        }
+        let hit = matched
+            .iter()
+            .any(|s| s.radius_m + o.footprint.signed_distance(s.center) > params.tolerance_m);
+        out.push(ObstacleEval {
             roof: ri,
-            roof_id: roof.id,
-            target: roof.target,
-            truth_area_m2: truth.area(),
-            truth_radius_m: truth_radius,
-            stated_truth_radius_m: roof.stated_best_radius_m,
-            returned_area_m2: returned.area(),
-            best_safe_radius_m: best_safe,
-            radius_ratio: best_safe / truth_radius,
-            iou: truth.iou(&returned).unwrap_or(0.0),
-            visible_area_m2: visible.area(),
-            visible_radius_m: visible_radius,
-            visible_radius_ratio: if visible_radius > 0.0 {
-                best_safe / visible_radius
-            } else {
-                0.0
-            },
-            visible_iou: visible.iou(&returned).unwrap_or(0.0),
+            class: o.class,
+            scanned_area_m2: n as f64 * grid.cell_area(),
+            covered_fraction: fp.intersection_count(returned) as f64 / n as f64,
+            hit,
         });
     }
     out
+}
+
+/// How the `returned` polygons and the best safe radius among them, `best_safe`, compare with
+/// the truth of roof `ri`, in all and in the part the sensor saw; `None` for a roof not scored
+/// or with too small a true landing circle.
+fn roof_eval(
+    ri: usize,
+    roof: &RoofTruth,
+    grid: Grid,
+    returned: &Mask,
+    best_safe: f64,
+    params: &MetricsParams,
+) -> Option<RoofEval> {
+    let truth = landable_mask(grid, roof);
+    let truth_radius = truth.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
+    if !roof.scored || truth_radius < params.min_truth_radius_m {
+        return None;
+    }
+    let mut visible = truth.clone();
+    visible.and_not(&hidden_mask(grid, roof));
+    let visible_radius = visible.largest_inscribed_circle().map_or(0.0, |(_, r)| r);
+    Some(RoofEval {
+        roof: ri,
+        roof_id: roof.id,
+        target: roof.target,
+        truth_area_m2: truth.area(),
+        truth_radius_m: truth_radius,
+        stated_truth_radius_m: roof.stated_best_radius_m,
+        returned_area_m2: returned.area(),
+        best_safe_radius_m: best_safe,
+        radius_ratio: best_safe / truth_radius,
+        iou: truth.iou(returned).unwrap_or(0.0),
+        visible_area_m2: visible.area(),
+        visible_radius_m: visible_radius,
+        visible_radius_ratio: if visible_radius > 0.0 {
+            best_safe / visible_radius
+        } else {
+            0.0
+        },
+        visible_iou: visible.iou(returned).unwrap_or(0.0),
+    })
 }
 
 #[cfg(test)]

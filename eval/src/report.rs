@@ -9,8 +9,8 @@ use serde::Serialize;
 
 use crate::EvalError;
 use crate::approach::{ApproachFrame, breakdown};
-use crate::metrics::{FrameEval, Verdict};
-use crate::plot::{BarGroup, bars_log, box_plot};
+use crate::metrics::{FrameEval, RoofEval, Verdict};
+use crate::plot::{BarGroup, Canvas, bars_log, box_plot};
 use crate::stats::{MeanCi, bootstrap_ci95, mean_ci95, median};
 
 /// Where the point classes come from: the three modes the evaluation compares.
@@ -339,55 +339,72 @@ fn summarize_column(
     failures: usize,
     unsafe_list: &mut Vec<UnsafeSite>,
 ) -> ModeSummary {
-    let mut s = ModeSummary {
+    let mut sites = SiteCounts::default();
+    let mut roofs = RoofSamples::default();
+    for r in recs {
+        sites.add(r, mode, fused, unsafe_list);
+        roofs.add(&r.eval.roofs);
+    }
+    let ratio_median_ci = bootstrap_ci95(&roofs.ratios, 2000, 0x5eed_0008, |x| {
+        median(x).unwrap_or(f64::NAN)
+    });
+    ModeSummary {
         mode,
         fused,
         frames: recs.len(),
         failures,
-        sites: 0,
-        unsafe_obstacle: 0,
-        unsafe_unseen: 0,
-        unsafe_outside_roof: 0,
-        off_roof: 0,
-        unlisted_roof: 0,
-        roofs: 0,
-        roofs_without_site: 0,
-        roofs_all: 0,
-        iou_all: None,
-        ratio_median_all: None,
-        iou: None,
-        iou_median: None,
-        ratio_median: None,
-        ratio_median_ci: None,
-        ratio: None,
-        visible_iou: None,
-        visible_ratio_median: None,
-        classes: Vec::new(),
-        tags: Vec::new(),
+        sites: sites.sites,
+        unsafe_obstacle: sites.unsafe_obstacle,
+        unsafe_unseen: sites.unsafe_unseen,
+        unsafe_outside_roof: sites.unsafe_outside_roof,
+        off_roof: sites.off_roof,
+        unlisted_roof: sites.unlisted_roof,
+        roofs: roofs.targets,
+        roofs_without_site: roofs.targets_without_site,
+        roofs_all: roofs.ious_all.len(),
+        iou_all: mean_ci95(&roofs.ious_all),
+        ratio_median_all: median(&roofs.ratios_all),
+        iou: mean_ci95(&roofs.ious),
+        iou_median: median(&roofs.ious),
+        ratio_median: median(&roofs.ratios),
+        ratio_median_ci,
+        ratio: mean_ci95(&roofs.ratios),
+        visible_iou: mean_ci95(&roofs.visible_ious),
+        visible_ratio_median: median(&roofs.visible_ratios),
+        classes: class_summaries(recs),
+        tags: tag_summaries(recs),
         breakdown: Vec::new(),
-        steps: Vec::new(),
-        round_trip: None,
-    };
-    let mut ious = Vec::new();
-    let mut visible_ious = Vec::new();
-    let mut visible_ratios = Vec::new();
-    let mut ratios = Vec::new();
-    let mut ious_all = Vec::new();
-    let mut ratios_all = Vec::new();
-    let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
-    for r in recs {
-        s.sites += r.eval.sites.len();
+        steps: step_means(recs),
+        round_trip: mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>()),
+    }
+}
+
+/// The sites of a column by verdict.
+#[derive(Default)]
+struct SiteCounts {
+    sites: usize,
+    unsafe_obstacle: usize,
+    unsafe_unseen: usize,
+    unsafe_outside_roof: usize,
+    off_roof: usize,
+    unlisted_roof: usize,
+}
+
+impl SiteCounts {
+    /// Counts the sites of `r`, appending the unsafe ones to `unsafe_list`.
+    fn add(&mut self, r: &FrameRecord, mode: Mode, fused: bool, unsafe_list: &mut Vec<UnsafeSite>) {
+        self.sites += r.eval.sites.len();
         for site in &r.eval.sites {
             match site.verdict {
                 Verdict::Safe => continue,
                 Verdict::Obstacle { seen, .. } => {
-                    s.unsafe_obstacle += 1;
-                    s.unsafe_unseen += usize::from(!seen);
+                    self.unsafe_obstacle += 1;
+                    self.unsafe_unseen += usize::from(!seen);
                 }
-                Verdict::OutsideRoof { .. } => s.unsafe_outside_roof += 1,
-                Verdict::OffRoof => s.off_roof += 1,
+                Verdict::OutsideRoof { .. } => self.unsafe_outside_roof += 1,
+                Verdict::OffRoof => self.off_roof += 1,
                 Verdict::UnlistedRoof => {
-                    s.unlisted_roof += 1;
+                    self.unlisted_roof += 1;
                     continue;
                 }
             }
@@ -401,41 +418,52 @@ fn summarize_column(
                 verdict: site.verdict,
             });
         }
-        for roof in &r.eval.roofs {
-            s.roofs_all += 1;
-            ious_all.push(roof.iou);
-            ratios_all.push(roof.radius_ratio);
+    }
+}
+
+/// The IoUs and radius ratios of a column's roofs: of every roof and of the target ones.
+#[derive(Default)]
+struct RoofSamples {
+    ious_all: Vec<f64>,
+    ratios_all: Vec<f64>,
+    targets: usize,
+    targets_without_site: usize,
+    ious: Vec<f64>,
+    ratios: Vec<f64>,
+    visible_ious: Vec<f64>,
+    visible_ratios: Vec<f64>,
+}
+
+impl RoofSamples {
+    fn add(&mut self, roofs: &[RoofEval]) {
+        for roof in roofs {
+            self.ious_all.push(roof.iou);
+            self.ratios_all.push(roof.radius_ratio);
             if !roof.target {
                 continue;
             }
-            s.roofs += 1;
+            self.targets += 1;
             if roof.best_safe_radius_m <= 0.0 {
-                s.roofs_without_site += 1;
+                self.targets_without_site += 1;
             }
-            ious.push(roof.iou);
-            ratios.push(roof.radius_ratio);
-            visible_ious.push(roof.visible_iou);
-            visible_ratios.push(roof.visible_radius_ratio);
-        }
-        for o in &r.eval.obstacles {
-            let e = classes.entry(o.class).or_default();
-            e.0 += 1;
-            e.1 += usize::from(o.hit);
-            e.2 += o.covered_fraction;
+            self.ious.push(roof.iou);
+            self.ratios.push(roof.radius_ratio);
+            self.visible_ious.push(roof.visible_iou);
+            self.visible_ratios.push(roof.visible_radius_ratio);
         }
     }
-    s.iou_all = mean_ci95(&ious_all);
-    s.ratio_median_all = median(&ratios_all);
-    s.iou = mean_ci95(&ious);
-    s.iou_median = median(&ious);
-    s.ratio = mean_ci95(&ratios);
-    s.ratio_median = median(&ratios);
-    s.visible_iou = mean_ci95(&visible_ious);
-    s.visible_ratio_median = median(&visible_ratios);
-    s.ratio_median_ci = bootstrap_ci95(&ratios, 2000, 0x5eed_0008, |x| {
-        median(x).unwrap_or(f64::NAN)
-    });
-    s.classes = classes
+}
+
+/// Obstacles, hits and mean covered fraction per class, by class number.
+fn class_summaries(recs: &[&FrameRecord]) -> Vec<ClassSummary> {
+    let mut classes: BTreeMap<u8, (usize, usize, f64)> = BTreeMap::new();
+    for o in recs.iter().flat_map(|r| &r.eval.obstacles) {
+        let e = classes.entry(o.class).or_default();
+        e.0 += 1;
+        e.1 += usize::from(o.hit);
+        e.2 += o.covered_fraction;
+    }
+    classes
         .into_iter()
         .map(|(class, (n, hit, cov))| ClassSummary {
             class,
@@ -444,14 +472,18 @@ fn summarize_column(
             hit,
             mean_covered: cov / n.max(1) as f64,
         })
-        .collect();
+        .collect()
+}
+
+/// The summary of the records of each tag, by tag name.
+fn tag_summaries(recs: &[&FrameRecord]) -> Vec<TagSummary> {
     let mut tag_names: Vec<&str> = recs
         .iter()
         .flat_map(|r| r.tags.iter().map(String::as_str))
         .collect();
     tag_names.sort_unstable();
     tag_names.dedup();
-    s.tags = tag_names
+    tag_names
         .into_iter()
         .map(|tag| {
             let tagged: Vec<&FrameRecord> = recs
@@ -461,8 +493,12 @@ fn summarize_column(
                 .collect();
             subset_summary(tag.to_string(), &tagged)
         })
-        .collect();
-    s.steps = (0..STEPS.len())
+        .collect()
+}
+
+/// The mean time of each pipeline step over the records that timed it.
+fn step_means(recs: &[&FrameRecord]) -> Vec<Option<MeanCi>> {
+    (0..STEPS.len())
         .map(|k| {
             mean_ci95(
                 &recs
@@ -471,9 +507,7 @@ fn summarize_column(
                     .collect::<Vec<_>>(),
             )
         })
-        .collect();
-    s.round_trip = mean_ci95(&recs.iter().map(|r| r.round_trip_ms).collect::<Vec<_>>());
-    s
+        .collect()
 }
 
 /// Answers, unsafe sites, mean target IoU and median target radius ratio of a subset of records.
@@ -857,6 +891,33 @@ impl Summary {
     ) -> Result<Vec<(&'static str, String)>, EvalError> {
         let labels: Vec<String> = self.modes.iter().map(ModeSummary::label).collect();
         let names: Vec<&str> = labels.iter().map(String::as_str).collect();
+        let charts = [
+            (
+                "Per-step time with 95 % CI (log scale)",
+                "timing.png",
+                self.timing_chart(&names),
+            ),
+            (
+                "Radius ratio (returned / true best) on the target roof, per mode",
+                "radius_ratio.png",
+                self.radius_ratio_chart(records, &names),
+            ),
+            (
+                "Polygon IoU with the true landable area on the target roof, per mode",
+                "iou.png",
+                self.iou_chart(records, &names),
+            ),
+        ];
+        let mut written = Vec::new();
+        for (title, file, canvas) in charts {
+            canvas.save(&dir.join(file))?;
+            written.push((title, file.to_string()));
+        }
+        Ok(written)
+    }
+
+    /// Server time per pipeline step, a bar per column, for the steps some column timed.
+    fn timing_chart(&self, names: &[&str]) -> Canvas {
         let groups: Vec<BarGroup> = STEPS
             .iter()
             .enumerate()
@@ -874,83 +935,63 @@ impl Summary {
                     .collect(),
             })
             .collect();
-        let mut written = Vec::new();
-        let mut save = |title: &'static str,
-                        file: &str,
-                        canvas: crate::plot::Canvas|
-         -> Result<(), EvalError> {
-            canvas.save(&dir.join(file))?;
-            written.push((title, file.to_string()));
-            Ok(())
-        };
-        save(
-            "Per-step time with 95 % CI (log scale)",
-            "timing.png",
-            bars_log(
-                "SERVER TIME PER STEP, MEAN AND 95% CI",
-                "MS (LOG)",
-                &names,
-                &groups,
-            ),
-        )?;
-        let per_mode = |f: &dyn Fn(&FrameRecord) -> Vec<f64>| -> Vec<(&str, Vec<f64>)> {
-            self.modes
-                .iter()
-                .zip(&names)
-                .map(|(m, name)| {
-                    (
-                        *name,
-                        records
-                            .iter()
-                            .filter(|r| r.mode == m.mode && r.fused == m.fused)
-                            .flat_map(f)
-                            .collect(),
-                    )
-                })
-                .collect()
-        };
-        let ratios = per_mode(&|r| {
-            r.eval
-                .roofs
-                .iter()
-                .filter(|x| x.target)
-                .map(|x| x.radius_ratio)
-                .collect()
-        });
+        bars_log(
+            "SERVER TIME PER STEP, MEAN AND 95% CI",
+            "MS (LOG)",
+            names,
+            &groups,
+        )
+    }
+
+    /// The target roofs' radius ratios per column, the axis up to the largest (at least 1.2,
+    /// at most 3).
+    fn radius_ratio_chart(&self, records: &[FrameRecord], names: &[&str]) -> Canvas {
+        let ratios = self.per_column_targets(records, names, |x| x.radius_ratio);
         let hi = ratios
             .iter()
             .flat_map(|(_, v)| v.iter().copied())
             .fold(1.2f64, f64::max)
             .min(3.0);
-        save(
-            "Radius ratio (returned / true best) on the target roof, per mode",
-            "radius_ratio.png",
-            box_plot(
-                "TARGET ROOF: RADIUS RATIO, RETURNED / TRUE BEST",
-                &ratios,
-                (0.0, hi),
-                Some(0.9),
-            ),
-        )?;
-        let ious = per_mode(&|r| {
-            r.eval
-                .roofs
-                .iter()
-                .filter(|x| x.target)
-                .map(|x| x.iou)
-                .collect()
-        });
-        save(
-            "Polygon IoU with the true landable area on the target roof, per mode",
-            "iou.png",
-            box_plot(
-                "TARGET ROOF: POLYGON IOU WITH TRUE LANDABLE AREA",
-                &ious,
-                (0.0, 1.0),
-                Some(0.93),
-            ),
-        )?;
-        Ok(written)
+        box_plot(
+            "TARGET ROOF: RADIUS RATIO, RETURNED / TRUE BEST",
+            &ratios,
+            (0.0, hi),
+            Some(0.9),
+        )
+    }
+
+    /// The target roofs' polygon IoUs per column.
+    fn iou_chart(&self, records: &[FrameRecord], names: &[&str]) -> Canvas {
+        let ious = self.per_column_targets(records, names, |x| x.iou);
+        box_plot(
+            "TARGET ROOF: POLYGON IOU WITH TRUE LANDABLE AREA",
+            &ious,
+            (0.0, 1.0),
+            Some(0.93),
+        )
+    }
+
+    /// `value` of every target roof of the records of each column, with the column's name.
+    fn per_column_targets<'n>(
+        &self,
+        records: &[FrameRecord],
+        names: &[&'n str],
+        value: impl Fn(&RoofEval) -> f64,
+    ) -> Vec<(&'n str, Vec<f64>)> {
+        self.modes
+            .iter()
+            .zip(names)
+            .map(|(m, name)| {
+                (
+                    *name,
+                    records
+                        .iter()
+                        .filter(|r| r.mode == m.mode && r.fused == m.fused)
+                        .flat_map(|r| r.eval.roofs.iter().filter(|x| x.target).map(&value))
+                        .collect(),
+                )
+            })
+            .collect()
     }
 }
 

@@ -15,7 +15,9 @@ use crate::approach::{ApproachFrame, fused_roofs};
 use crate::geom::{P2, Polygon2, convex_hull};
 use crate::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
 use crate::report::{FrameFailure, FrameRecord, FusionInfo, Mode, STEPS, column_name};
-use landing_client::{ClientError, FrameOutcome, LandingClient, StreamConfig};
+use landing_client::{
+    ClientError, FrameError, FrameOutcome, LandingClient, StreamConfig, StreamItem,
+};
 
 use crate::EvalError;
 
@@ -236,25 +238,16 @@ pub async fn run(
     let mut failures = Vec::new();
     for (i, scenario) in scenarios.iter().enumerate() {
         for &mode in &config.modes {
-            let options = PipelineOptions {
-                segmentation_mode: mode.segmentation_mode() as i32,
-                ..config.options.clone()
-            };
-            let mut frame = scenario.frame.clone();
-            if mode == Mode::Truth {
-                frame.class_image.clone_from(&scenario.labels);
-            }
+            let frame = frame_to_send(scenario, mode);
             let started = Instant::now();
-            match client.detect_with(frame, Some(options)).await {
+            match client
+                .detect_with(frame, Some(mode_options(config, mode)))
+                .await
+            {
                 Ok(result) => {
                     let record = record_of(scenario, mode, &result, started.elapsed(), &params);
-                    if let Some(dir) = &config.overlay_dir {
-                        let any_unsafe = record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
-                        if any_unsafe || config.overlay_all {
-                            let name = format!("{} {}", scenario.name, mode.name());
-                            write_overlay(dir, &name, &scenario.roofs, &result, &record)?;
-                        }
-                    }
+                    let title = format!("{} {}", scenario.name, mode.name());
+                    draw_if_asked(config, &title, &scenario.roofs, &result, &record)?;
                     records.push(record);
                 }
                 Err(e) if e.code().is_some() && !e.is_unreachable() => {
@@ -353,27 +346,11 @@ async fn stream_approach(
     let window = config.stream_max_in_flight.max(1);
     let (sender, mut results) = client.open_stream(StreamConfig {
         overflow_policy: OverflowPolicy::Block,
-        options: Some(PipelineOptions {
-            segmentation_mode: mode.segmentation_mode() as i32,
-            ..config.options.clone()
-        }),
+        options: Some(mode_options(config, mode)),
         max_in_flight: window,
         fusion: Some(*fusion),
     });
-    let by_sequence: HashMap<u64, usize> = frames
-        .iter()
-        .enumerate()
-        .map(|(k, s)| (s.frame.sequence, k))
-        .collect();
-    let mut answered = vec![false; frames.len()];
-    let mut records = Vec::new();
-    let mut failures = Vec::new();
-    let failure = |k: usize, error: String| FrameFailure {
-        mode,
-        frame: frames[k].name.clone(),
-        fused: true,
-        error,
-    };
+    let mut scoring = StreamScoring::new(frames, roofs, mode, config, params);
     // Sending and receiving alternate on this task: a frame is only sent while the window has
     // room, so a send never waits on an answer that nobody is reading. Once every frame is sent,
     // dropping the sender ends the request stream: the server answers what is in flight and
@@ -383,11 +360,7 @@ async fn stream_approach(
     loop {
         if let Some(tx) = sender.as_mut() {
             if next < frames.len() && tx.in_flight() < window {
-                let mut frame = frames[next].frame.clone();
-                if mode == Mode::Truth {
-                    frame.class_image.clone_from(&frames[next].labels);
-                }
-                match tx.send(frame).await {
+                match tx.send(frame_to_send(frames[next], mode)).await {
                     Ok(()) => next += 1,
                     // The stream is over; what it left unanswered comes out of `results`.
                     Err(_) => sender = None,
@@ -402,72 +375,166 @@ async fn stream_approach(
             break;
         };
         match item {
-            Ok(item) => {
-                let Some(&k) = by_sequence.get(&item.sequence) else {
-                    continue;
-                };
-                answered[k] = true;
-                match item.outcome {
-                    FrameOutcome::Result(result) => {
-                        if result.fusion.is_none() {
-                            return Err(EvalError::Invalid {
-                                field: "FrameResult.fusion",
-                                reason: format!(
-                                    "frame {} of a fused stream was answered without a fusion summary: the server does not fuse",
-                                    frames[k].name
-                                ),
-                            });
-                        }
-                        let record = fused_record_of(
-                            frames[k],
-                            &roofs[k],
-                            mode,
-                            &result,
-                            item.latency,
-                            params,
-                        );
-                        if let Some(dir) = &config.overlay_dir {
-                            let any_unsafe =
-                                record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
-                            if any_unsafe || config.overlay_all {
-                                let name =
-                                    format!("{} {}", frames[k].name, column_name(mode, true));
-                                write_overlay(dir, &name, &roofs[k], &result, &record)?;
-                            }
-                        }
-                        records.push(record);
-                    }
-                    FrameOutcome::Error(e) => failures.push(failure(k, e.to_string())),
-                    FrameOutcome::Skipped { superseded_by } => failures.push(failure(
-                        k,
-                        format!("skipped, superseded by frame {superseded_by}"),
-                    )),
-                }
-            }
+            Ok(item) => scoring.answer(item)?,
             Err(ClientError::StreamBroken { unanswered, status })
                 if status
                     .as_ref()
                     .is_none_or(|s| landing_client::code_label(s.code) != "unavailable") =>
             {
-                let why = status.map_or_else(
-                    || "the stream ended without an answer".to_string(),
-                    |s| format!("the stream broke: {s}"),
-                );
-                for seq in unanswered {
-                    if let Some(&k) = by_sequence.get(&seq) {
-                        answered[k] = true;
-                        failures.push(failure(k, why.clone()));
-                    }
-                }
+                scoring.broken(&unanswered, status.as_deref());
                 break;
             }
             Err(e) => return Err(e.into()),
         }
     }
-    for (k, _) in answered.iter().enumerate().filter(|(_, a)| !**a) {
-        failures.push(failure(k, "not answered: the stream closed first".into()));
+    Ok(scoring.finish())
+}
+
+/// The answers of one fused stream of an approach, scored as they come; every frame ends up with
+/// one record or one failure.
+struct StreamScoring<'a> {
+    frames: &'a [&'a Scenario],
+    roofs: &'a [Vec<RoofTruth>],
+    mode: Mode,
+    config: &'a EvalConfig,
+    params: &'a MetricsParams,
+    /// The index in `frames` of each frame sequence.
+    by_sequence: HashMap<u64, usize>,
+    answered: Vec<bool>,
+    records: Vec<FrameRecord>,
+    failures: Vec<FrameFailure>,
+}
+
+impl<'a> StreamScoring<'a> {
+    fn new(
+        frames: &'a [&'a Scenario],
+        roofs: &'a [Vec<RoofTruth>],
+        mode: Mode,
+        config: &'a EvalConfig,
+        params: &'a MetricsParams,
+    ) -> Self {
+        let by_sequence = frames
+            .iter()
+            .enumerate()
+            .map(|(k, s)| (s.frame.sequence, k))
+            .collect();
+        Self {
+            frames,
+            roofs,
+            mode,
+            config,
+            params,
+            by_sequence,
+            answered: vec![false; frames.len()],
+            records: Vec::new(),
+            failures: Vec::new(),
+        }
     }
-    Ok((records, failures))
+
+    /// Scores one answer. A result without a fusion summary is an error: the server does not
+    /// fuse, and the fused columns would silently be single-frame ones.
+    fn answer(&mut self, item: StreamItem) -> Result<(), EvalError> {
+        let Some(&k) = self.by_sequence.get(&item.sequence) else {
+            return Ok(());
+        };
+        self.answered[k] = true;
+        let frame = self.frames[k];
+        match item.outcome {
+            FrameOutcome::Result(result) => {
+                if result.fusion.is_none() {
+                    return Err(EvalError::Invalid {
+                        field: "FrameResult.fusion",
+                        reason: format!(
+                            "frame {} of a fused stream was answered without a fusion summary: the server does not fuse",
+                            frame.name
+                        ),
+                    });
+                }
+                let (roofs, mode) = (&self.roofs[k], self.mode);
+                let record =
+                    fused_record_of(frame, roofs, mode, &result, item.latency, self.params);
+                let title = format!("{} {}", frame.name, column_name(mode, true));
+                draw_if_asked(self.config, &title, roofs, &result, &record)?;
+                self.records.push(record);
+            }
+            FrameOutcome::Error(e) => self.fail(k, e.to_string()),
+            FrameOutcome::Skipped { superseded_by } => {
+                self.fail(k, format!("skipped, superseded by frame {superseded_by}"))
+            }
+        }
+        Ok(())
+    }
+
+    /// The stream broke with `unanswered` frames in flight: each is a failure.
+    fn broken(&mut self, unanswered: &[u64], status: Option<&FrameError>) {
+        let why = status.map_or_else(
+            || "the stream ended without an answer".to_string(),
+            |s| format!("the stream broke: {s}"),
+        );
+        for seq in unanswered {
+            if let Some(&k) = self.by_sequence.get(seq) {
+                self.answered[k] = true;
+                self.fail(k, why.clone());
+            }
+        }
+    }
+
+    fn fail(&mut self, k: usize, error: String) {
+        self.failures.push(FrameFailure {
+            mode: self.mode,
+            frame: self.frames[k].name.clone(),
+            fused: true,
+            error,
+        });
+    }
+
+    /// The records and failures, with a failure for each frame the stream never answered.
+    fn finish(mut self) -> (Vec<FrameRecord>, Vec<FrameFailure>) {
+        let unanswered: Vec<usize> = (0..self.frames.len())
+            .filter(|&k| !self.answered[k])
+            .collect();
+        for k in unanswered {
+            self.fail(k, "not answered: the stream closed first".into());
+        }
+        (self.records, self.failures)
+    }
+}
+
+/// The pipeline options of every frame sent in `mode`.
+fn mode_options(config: &EvalConfig, mode: Mode) -> PipelineOptions {
+    PipelineOptions {
+        segmentation_mode: mode.segmentation_mode() as i32,
+        ..config.options.clone()
+    }
+}
+
+/// The frame of `scenario` as sent in `mode`: with the true labels as its class image in
+/// `truth` mode.
+fn frame_to_send(scenario: &Scenario, mode: Mode) -> Frame {
+    let mut frame = scenario.frame.clone();
+    if mode == Mode::Truth {
+        frame.class_image.clone_from(&scenario.labels);
+    }
+    frame
+}
+
+/// Draws the answer ([`write_overlay`]) when [`EvalConfig::overlay_dir`] is set and it has an
+/// unsafe site (any answer with [`EvalConfig::overlay_all`]).
+fn draw_if_asked(
+    config: &EvalConfig,
+    title: &str,
+    roofs: &[RoofTruth],
+    result: &FrameResult,
+    record: &FrameRecord,
+) -> Result<(), EvalError> {
+    let Some(dir) = &config.overlay_dir else {
+        return Ok(());
+    };
+    let any_unsafe = record.eval.sites.iter().any(|s| s.verdict.is_unsafe());
+    if any_unsafe || config.overlay_all {
+        write_overlay(dir, title, roofs, result, record)?;
+    }
+    Ok(())
 }
 
 /// Draws one answer over `roofs` into `dir`, titled `title` (`<recording>#<sequence> <column>`),

@@ -121,65 +121,15 @@ pub fn scenario_of(
     truth: &GroundTruth,
     labels: Option<CameraImage>,
 ) -> Scenario {
-    let mut roofs = Vec::new();
-    let mut raised = Vec::new();
     let eye = sensor_position(&frame);
-    for (k, r) in truth.roofs.iter().enumerate() {
-        let outline = Polygon2::simple(ring(r.outline.as_ref()));
-        let landable = r
-            .landable_region
-            .as_ref()
-            .map(|p| Polygon2 {
-                shell: ring(p.shell.as_ref()),
-                holes: vec![],
-            })
-            .unwrap_or_default();
-        let interior = interior_of(&outline, &landable, r.parapet_height_m);
-        let hidden = eye.map_or_else(Vec::new, |eye| hidden_parts(eye, r, &interior));
-        let obstacles: Vec<Obstacle> = r
-            .obstacles
-            .iter()
-            .map(|o| Obstacle {
-                class: u8::try_from(o.semantic_class).unwrap_or(0),
-                footprint: Polygon2::simple(ring(o.footprint.as_ref())),
-                seen: o.seen_by_lidar,
-            })
-            .collect();
-        for o in &r.obstacles {
-            if o.semantic_class == SemanticClass::BuildingRooftop as i32 {
-                let fp = Polygon2::simple(ring(o.footprint.as_ref()));
-                raised.push(RoofTruth {
-                    id: r.building,
-                    outline: fp.clone(),
-                    interior: fp,
-                    height_m: r.height_m + o.height_m,
-                    obstacles: vec![],
-                    scanned: None,
-                    hidden: vec![],
-                    in_sight: None,
-                    stated_best_radius_m: None,
-                    scored: false,
-                    target: false,
-                });
-            }
-        }
-        roofs.push(RoofTruth {
-            id: r.building,
-            outline,
-            interior,
-            height_m: r.height_m,
-            obstacles,
-            // The simulator's scanned region: interior ∩ convex hull of the scan on this roof.
-            scanned: (landable.shell.len() >= 3).then_some(landable),
-            hidden,
-            in_sight: None,
-            stated_best_radius_m: Some(r.best_safe_radius_m),
-            scored: true,
-            // The ground truth lists the approached roof first.
-            target: k == 0 && r.building == truth.target_building,
-        });
-    }
-    roofs.extend(raised);
+    let mut roofs: Vec<RoofTruth> = truth
+        .roofs
+        .iter()
+        .enumerate()
+        // The ground truth lists the approached roof first.
+        .map(|(k, r)| scored_roof(r, eye, k == 0 && r.building == truth.target_building))
+        .collect();
+    roofs.extend(truth.roofs.iter().flat_map(raised_roofs));
     let camera_above_roof_m = truth
         .camera_pose
         .as_ref()
@@ -199,6 +149,68 @@ pub fn scenario_of(
         labels,
         roofs,
     }
+}
+
+/// A roof of the ground truth, scored; the part of it hidden from a sensor at `eye`, if known.
+fn scored_roof(r: &landing_proto::v1::RoofTruth, eye: Option<[f64; 3]>, target: bool) -> RoofTruth {
+    let outline = Polygon2::simple(ring(r.outline.as_ref()));
+    let landable = r
+        .landable_region
+        .as_ref()
+        .map(|p| Polygon2 {
+            shell: ring(p.shell.as_ref()),
+            holes: vec![],
+        })
+        .unwrap_or_default();
+    let interior = interior_of(&outline, &landable, r.parapet_height_m);
+    let hidden = eye.map_or_else(Vec::new, |eye| hidden_parts(eye, r, &interior));
+    let obstacles: Vec<Obstacle> = r
+        .obstacles
+        .iter()
+        .map(|o| Obstacle {
+            class: u8::try_from(o.semantic_class).unwrap_or(0),
+            footprint: Polygon2::simple(ring(o.footprint.as_ref())),
+            seen: o.seen_by_lidar,
+        })
+        .collect();
+    RoofTruth {
+        id: r.building,
+        outline,
+        interior,
+        height_m: r.height_m,
+        obstacles,
+        // The simulator's scanned region: interior ∩ convex hull of the scan on this roof.
+        scanned: (landable.shell.len() >= 3).then_some(landable),
+        hidden,
+        in_sight: None,
+        stated_best_radius_m: Some(r.best_safe_radius_m),
+        scored: true,
+        target,
+    }
+}
+
+/// The small buildings standing on roof `r` as roofs of their own, raised by their height and
+/// not scored.
+fn raised_roofs(r: &landing_proto::v1::RoofTruth) -> impl Iterator<Item = RoofTruth> + '_ {
+    r.obstacles
+        .iter()
+        .filter(|o| o.semantic_class == SemanticClass::BuildingRooftop as i32)
+        .map(move |o| {
+            let fp = Polygon2::simple(ring(o.footprint.as_ref()));
+            RoofTruth {
+                id: r.building,
+                outline: fp.clone(),
+                interior: fp,
+                height_m: r.height_m + o.height_m,
+                obstacles: vec![],
+                scanned: None,
+                hidden: vec![],
+                in_sight: None,
+                stated_best_radius_m: None,
+                scored: false,
+                target: false,
+            }
+        })
 }
 
 /// The LiDAR's origin in the world, where the frame's cloud has a pose.

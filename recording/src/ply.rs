@@ -238,15 +238,7 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), PlyError> {
     let mut elements: Vec<Element> = Vec::new();
     loop {
         line_no += 1;
-        let Some(end) = bytes[pos..].iter().position(|&b| b == b'\n') else {
-            return Err(header_error(line_no, "the header ends before `end_header`"));
-        };
-        let raw = &bytes[pos..pos + end];
-        pos += end + 1;
-        let line = std::str::from_utf8(raw)
-            .map_err(|_| header_error(line_no, "the header line is not valid UTF-8"))?
-            .trim_end_matches('\r')
-            .trim();
+        let line = next_header_line(bytes, &mut pos, line_no)?;
         let words: Vec<&str> = line.split_whitespace().collect();
         if line_no == 1 {
             if line != "ply" {
@@ -259,126 +251,23 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), PlyError> {
         }
         match words.first().copied() {
             None | Some("comment") | Some("obj_info") => {}
-            Some("format") => {
-                if words.len() != 3 {
-                    return Err(header_error(
-                        line_no,
-                        format!("malformed format line `{line}`"),
-                    ));
-                }
-                if words[2] != "1.0" {
-                    return Err(header_error(
-                        line_no,
-                        format!("unsupported PLY version `{}`", words[2]),
-                    ));
-                }
-                format = Some(match words[1] {
-                    "ascii" => Format::Ascii,
-                    "binary_little_endian" => Format::BinaryLittleEndian,
-                    "binary_big_endian" => {
-                        return Err(header_error(
-                            line_no,
-                            "binary_big_endian PLY is not supported; convert it to \
-                             binary_little_endian or ascii",
-                        ));
-                    }
-                    other => {
-                        return Err(header_error(line_no, format!("unknown format `{other}`")));
-                    }
-                });
-            }
-            Some("element") => {
-                if words.len() != 3 {
-                    return Err(header_error(
-                        line_no,
-                        format!("malformed element line `{line}`"),
-                    ));
-                }
-                let count: usize = words[2].parse().map_err(|_| {
-                    header_error(
-                        line_no,
-                        format!("element `{}` has a bad count `{}`", words[1], words[2]),
-                    )
-                })?;
-                if count > MAX_COUNT {
-                    return Err(header_error(
-                        line_no,
-                        format!("element `{}` count {count} is too large", words[1]),
-                    ));
-                }
-                elements.push(Element {
-                    name: words[1].to_owned(),
-                    count,
-                    properties: Vec::new(),
-                });
-            }
+            Some("format") => format = Some(parse_format(line_no, line, &words)?),
+            Some("element") => elements.push(parse_element(line_no, line, &words)?),
             Some("property") => {
                 let Some(element) = elements.last_mut() else {
                     return Err(header_error(line_no, "a property comes before any element"));
                 };
-                let (kind, name) = match words.as_slice() {
-                    ["property", "list", count, item, name] => {
-                        let count_t = Scalar::parse(count).ok_or_else(|| {
-                            header_error(
-                                line_no,
-                                format!(
-                                    "property `{name}` has an unsupported list count type `{count}`"
-                                ),
-                            )
-                        })?;
-                        if !count_t.is_integer() {
-                            return Err(header_error(
-                                line_no,
-                                format!(
-                                    "property `{name}` has a non-integer list count type `{count}`"
-                                ),
-                            ));
-                        }
-                        let item_t = Scalar::parse(item).ok_or_else(|| {
-                            header_error(
-                                line_no,
-                                format!(
-                                    "property `{name}` has an unsupported list item type `{item}`"
-                                ),
-                            )
-                        })?;
-                        (
-                            PropertyKind::List {
-                                count: count_t,
-                                item: item_t,
-                            },
-                            *name,
-                        )
-                    }
-                    ["property", ty, name] => {
-                        let t = Scalar::parse(ty).ok_or_else(|| {
-                            header_error(
-                                line_no,
-                                format!("property `{name}` has an unsupported type `{ty}`"),
-                            )
-                        })?;
-                        (PropertyKind::Scalar(t), *name)
-                    }
-                    _ => {
-                        return Err(header_error(
-                            line_no,
-                            format!("malformed property line `{line}`"),
-                        ));
-                    }
-                };
-                if element.properties.iter().any(|p| p.name == name) {
+                let property = parse_property(line_no, line, &words)?;
+                if element.properties.iter().any(|p| p.name == property.name) {
                     return Err(header_error(
                         line_no,
                         format!(
-                            "property `{name}` is declared twice in element `{}`",
-                            element.name
+                            "property `{}` is declared twice in element `{}`",
+                            property.name, element.name
                         ),
                     ));
                 }
-                element.properties.push(Property {
-                    name: name.to_owned(),
-                    kind,
-                });
+                element.properties.push(property);
             }
             Some("end_header") => break,
             Some(other) => {
@@ -391,6 +280,118 @@ fn parse_header(bytes: &[u8]) -> Result<(Header, &[u8]), PlyError> {
     }
     let format = format.ok_or_else(|| header_error(line_no, "the header has no `format` line"))?;
     Ok((Header { format, elements }, &bytes[pos..]))
+}
+
+/// Header line `line_no`, starting at `*pos`, trimmed; moves `*pos` past it.
+fn next_header_line<'a>(
+    bytes: &'a [u8],
+    pos: &mut usize,
+    line_no: usize,
+) -> Result<&'a str, PlyError> {
+    let Some(end) = bytes[*pos..].iter().position(|&b| b == b'\n') else {
+        return Err(header_error(line_no, "the header ends before `end_header`"));
+    };
+    let raw = &bytes[*pos..*pos + end];
+    *pos += end + 1;
+    Ok(std::str::from_utf8(raw)
+        .map_err(|_| header_error(line_no, "the header line is not valid UTF-8"))?
+        .trim_end_matches('\r')
+        .trim())
+}
+
+/// `format <ascii|binary_little_endian> 1.0`.
+fn parse_format(line_no: usize, line: &str, words: &[&str]) -> Result<Format, PlyError> {
+    if words.len() != 3 {
+        return Err(header_error(
+            line_no,
+            format!("malformed format line `{line}`"),
+        ));
+    }
+    if words[2] != "1.0" {
+        return Err(header_error(
+            line_no,
+            format!("unsupported PLY version `{}`", words[2]),
+        ));
+    }
+    match words[1] {
+        "ascii" => Ok(Format::Ascii),
+        "binary_little_endian" => Ok(Format::BinaryLittleEndian),
+        "binary_big_endian" => Err(header_error(
+            line_no,
+            "binary_big_endian PLY is not supported; convert it to \
+             binary_little_endian or ascii",
+        )),
+        other => Err(header_error(line_no, format!("unknown format `{other}`"))),
+    }
+}
+
+/// `element <name> <count>`, with no properties yet.
+fn parse_element(line_no: usize, line: &str, words: &[&str]) -> Result<Element, PlyError> {
+    if words.len() != 3 {
+        return Err(header_error(
+            line_no,
+            format!("malformed element line `{line}`"),
+        ));
+    }
+    let count: usize = words[2].parse().map_err(|_| {
+        header_error(
+            line_no,
+            format!("element `{}` has a bad count `{}`", words[1], words[2]),
+        )
+    })?;
+    if count > MAX_COUNT {
+        return Err(header_error(
+            line_no,
+            format!("element `{}` count {count} is too large", words[1]),
+        ));
+    }
+    Ok(Element {
+        name: words[1].to_owned(),
+        count,
+        properties: Vec::new(),
+    })
+}
+
+/// `property <type> <name>` or `property list <count type> <item type> <name>`.
+fn parse_property(line_no: usize, line: &str, words: &[&str]) -> Result<Property, PlyError> {
+    let scalar = |name: &str, what: &str, ty: &str| {
+        Scalar::parse(ty).ok_or_else(|| {
+            header_error(
+                line_no,
+                format!("property `{name}` has an unsupported {what}type `{ty}`"),
+            )
+        })
+    };
+    let (kind, name) = match words {
+        ["property", "list", count, item, name] => {
+            let count_t = scalar(name, "list count ", count)?;
+            if !count_t.is_integer() {
+                return Err(header_error(
+                    line_no,
+                    format!("property `{name}` has a non-integer list count type `{count}`"),
+                ));
+            }
+            let item_t = scalar(name, "list item ", item)?;
+            (
+                PropertyKind::List {
+                    count: count_t,
+                    item: item_t,
+                },
+                *name,
+            )
+        }
+        ["property", ty, name] => (PropertyKind::Scalar(scalar(name, "", ty)?), *name),
+        _ => {
+            return Err(header_error(
+                line_no,
+                format!("malformed property line `{line}`"),
+            ));
+        }
+    };
+    Ok(Property {
+        name: name.to_owned(),
+        kind,
+    })
 }
 
 fn vertex_layout(header: &Header) -> Result<(usize, VertexLayout), PlyError> {
@@ -512,58 +513,7 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
                     format!("the file ends after {index} of {} rows", element.count),
                 )
             })?;
-            let mut words = line.split_whitespace();
-            values.clear();
-            for property in &element.properties {
-                let mut next = |t: Scalar| -> Result<f64, PlyError> {
-                    let word = words.next().ok_or_else(|| {
-                        data_error(element, index, &property.name, "the row has too few values")
-                    })?;
-                    let v: f64 = word.parse().map_err(|_| {
-                        data_error(
-                            element,
-                            index,
-                            &property.name,
-                            format!("`{word}` is not a number"),
-                        )
-                    })?;
-                    if t.is_integer() && v.fract() != 0.0 {
-                        return Err(data_error(
-                            element,
-                            index,
-                            &property.name,
-                            format!("`{word}` is not an integer"),
-                        ));
-                    }
-                    Ok(v)
-                };
-                match property.kind {
-                    PropertyKind::Scalar(t) => values.push(next(t)?),
-                    PropertyKind::List { count, item } => {
-                        let n = next(count)?;
-                        if n < 0.0 {
-                            return Err(data_error(
-                                element,
-                                index,
-                                &property.name,
-                                format!("negative list length {n}"),
-                            ));
-                        }
-                        for _ in 0..n as usize {
-                            next(item)?;
-                        }
-                        values.push(0.0);
-                    }
-                }
-            }
-            if words.next().is_some() {
-                return Err(data_error(
-                    element,
-                    index,
-                    "",
-                    "the row has more values than the element has properties",
-                ));
-            }
+            read_ascii_row(element, index, line, &mut values)?;
             if ei == vertex_index {
                 push_vertex(element, index, &layout, &values, &mut cloud)?;
             }
@@ -574,6 +524,77 @@ fn read_ascii(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
         }
     }
     Ok(cloud)
+}
+
+/// Reads row `index` of `element` from `line` into `values`, one value per property (0 for a
+/// list, which is checked and skipped).
+fn read_ascii_row(
+    element: &Element,
+    index: usize,
+    line: &str,
+    values: &mut Vec<f64>,
+) -> Result<(), PlyError> {
+    let mut words = line.split_whitespace();
+    values.clear();
+    for property in &element.properties {
+        let mut next = |t: Scalar| ascii_value(words.next(), t, element, index, &property.name);
+        match property.kind {
+            PropertyKind::Scalar(t) => values.push(next(t)?),
+            PropertyKind::List { count, item } => {
+                let n = next(count)?;
+                if n < 0.0 {
+                    return Err(data_error(
+                        element,
+                        index,
+                        &property.name,
+                        format!("negative list length {n}"),
+                    ));
+                }
+                for _ in 0..n as usize {
+                    next(item)?;
+                }
+                values.push(0.0);
+            }
+        }
+    }
+    if words.next().is_some() {
+        return Err(data_error(
+            element,
+            index,
+            "",
+            "the row has more values than the element has properties",
+        ));
+    }
+    Ok(())
+}
+
+/// One value of type `t` from `word`, the next word of the row (`None` at its end).
+fn ascii_value(
+    word: Option<&str>,
+    t: Scalar,
+    element: &Element,
+    index: usize,
+    property: &str,
+) -> Result<f64, PlyError> {
+    let word =
+        word.ok_or_else(|| data_error(element, index, property, "the row has too few values"))?;
+    let v: f64 = word.parse().map_err(|_| {
+        data_error(
+            element,
+            index,
+            property,
+            format!("`{word}` is not a number"),
+        )
+    })?;
+    if t.is_integer() && v.fract() != 0.0 {
+        return Err(data_error(
+            element,
+            index,
+            property,
+            format!("`{word}` is not an integer"),
+        ));
+    }
+    Ok(v)
 }
 
 fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
@@ -589,50 +610,7 @@ fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
             continue;
         }
         for index in 0..element.count {
-            values.clear();
-            for property in &element.properties {
-                let mut take = |t: Scalar| -> Result<f64, PlyError> {
-                    let size = t.size();
-                    let bytes = body.get(pos..pos + size).ok_or_else(|| {
-                        data_error(
-                            element,
-                            index,
-                            &property.name,
-                            format!(
-                                "truncated data: the file ends at byte {} of the body",
-                                body.len()
-                            ),
-                        )
-                    })?;
-                    pos += size;
-                    Ok(t.decode_le(bytes))
-                };
-                match property.kind {
-                    PropertyKind::Scalar(t) => values.push(take(t)?),
-                    PropertyKind::List { count, item } => {
-                        let n = take(count)?;
-                        if n < 0.0 {
-                            return Err(data_error(
-                                element,
-                                index,
-                                &property.name,
-                                format!("negative list length {n}"),
-                            ));
-                        }
-                        let skip = (n as usize).saturating_mul(item.size());
-                        if body.len().saturating_sub(pos) < skip {
-                            return Err(data_error(
-                                element,
-                                index,
-                                &property.name,
-                                "truncated data inside a list",
-                            ));
-                        }
-                        pos += skip;
-                        values.push(0.0);
-                    }
-                }
-            }
+            read_binary_row(element, index, body, &mut pos, &mut values)?;
             if ei == vertex_index {
                 push_vertex(element, index, &layout, &values, &mut cloud)?;
             }
@@ -642,6 +620,62 @@ fn read_binary(header: &Header, body: &[u8]) -> Result<PlyCloud, PlyError> {
         }
     }
     Ok(cloud)
+}
+
+/// Reads row `index` of `element` from `body` at `*pos` into `values`, one value per property
+/// (0 for a list, which is skipped); moves `*pos` past the row.
+fn read_binary_row(
+    element: &Element,
+    index: usize,
+    body: &[u8],
+    pos: &mut usize,
+    values: &mut Vec<f64>,
+) -> Result<(), PlyError> {
+    values.clear();
+    for property in &element.properties {
+        let mut take = |t: Scalar| -> Result<f64, PlyError> {
+            let size = t.size();
+            let bytes = body.get(*pos..*pos + size).ok_or_else(|| {
+                data_error(
+                    element,
+                    index,
+                    &property.name,
+                    format!(
+                        "truncated data: the file ends at byte {} of the body",
+                        body.len()
+                    ),
+                )
+            })?;
+            *pos += size;
+            Ok(t.decode_le(bytes))
+        };
+        match property.kind {
+            PropertyKind::Scalar(t) => values.push(take(t)?),
+            PropertyKind::List { count, item } => {
+                let n = take(count)?;
+                if n < 0.0 {
+                    return Err(data_error(
+                        element,
+                        index,
+                        &property.name,
+                        format!("negative list length {n}"),
+                    ));
+                }
+                let skip = (n as usize).saturating_mul(item.size());
+                if body.len().saturating_sub(*pos) < skip {
+                    return Err(data_error(
+                        element,
+                        index,
+                        &property.name,
+                        "truncated data inside a list",
+                    ));
+                }
+                *pos += skip;
+                values.push(0.0);
+            }
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -114,96 +114,7 @@ fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
     let mut entries = Vec::new();
     let mut moments: BTreeMap<u64, Moment> = BTreeMap::new();
     for message in messages(bytes) {
-        let message = message?;
-        let Some(schema) = message
-            .channel
-            .schema
-            .as_ref()
-            .filter(|s| s.encoding == "protobuf")
-            .map(|s| s.name.as_str())
-        else {
-            continue;
-        };
-        let topic = message.channel.topic.as_str();
-        let decode_error = |schema: &'static str| {
-            let topic = topic.to_string();
-            let sequence = message.sequence;
-            move |e: prost::DecodeError| Error::Decode {
-                topic,
-                sequence,
-                schema,
-                reason: e.to_string(),
-            }
-        };
-        macro_rules! decode {
-            ($t:ty, $name:expr) => {
-                <$t>::decode(&message.data[..]).map_err(decode_error($name))?
-            };
-        }
-        let at = message.log_time;
-        match (schema, topic) {
-            (FRAME_SCHEMA, _) => entries.push(Entry::Whole(Box::new(RecordedFrame {
-                topic: topic.to_string(),
-                log_time_ns: at,
-                frame: decode!(v1::Frame, FRAME_SCHEMA),
-                truth: None,
-                labels: None,
-            }))),
-            (FRAME_HEADER_SCHEMA, FRAME_TOPIC) => {
-                let header = decode!(v1::FrameHeader, FRAME_HEADER_SCHEMA);
-                let m = moments.entry(at).or_default();
-                if m.header.is_none() && m.cloud.is_none() {
-                    entries.push(Entry::Foxglove(at));
-                }
-                m.header = Some(header);
-            }
-            ("foxglove.PointCloud", LIDAR_TOPIC) => {
-                let cloud = decode!(fox::PointCloud, "foxglove.PointCloud");
-                let m = moments.entry(at).or_default();
-                if m.header.is_none() && m.cloud.is_none() {
-                    entries.push(Entry::Foxglove(at));
-                }
-                m.cloud = Some((cloud, message.sequence));
-            }
-            ("foxglove.CompressedImage", CAMERA_TOPIC) => {
-                moments.entry(at).or_default().image = Some(Image::Compressed(decode!(
-                    fox::CompressedImage,
-                    "foxglove.CompressedImage"
-                )));
-            }
-            ("foxglove.RawImage", CAMERA_RAW_TOPIC) => {
-                moments.entry(at).or_default().image =
-                    Some(Image::Raw(decode!(fox::RawImage, "foxglove.RawImage")));
-            }
-            ("foxglove.CameraCalibration", CALIBRATION_TOPIC) => {
-                moments.entry(at).or_default().calibration = Some(decode!(
-                    fox::CameraCalibration,
-                    "foxglove.CameraCalibration"
-                ));
-            }
-            ("foxglove.FrameTransforms", TF_TOPIC) => {
-                moments.entry(at).or_default().transforms =
-                    Some(decode!(fox::FrameTransforms, "foxglove.FrameTransforms"));
-            }
-            ("foxglove.CompressedImage", LABELS_TOPIC) => {
-                moments.entry(at).or_default().labels = Some(Image::Compressed(decode!(
-                    fox::CompressedImage,
-                    "foxglove.CompressedImage"
-                )));
-            }
-            ("foxglove.RawImage", LABELS_RAW_TOPIC) => {
-                moments.entry(at).or_default().labels =
-                    Some(Image::Raw(decode!(fox::RawImage, "foxglove.RawImage")));
-            }
-            (LABELS_SCHEMA, LABELS_TOPIC) => {
-                moments.entry(at).or_default().legacy_labels =
-                    Some(decode!(v1::CameraImage, LABELS_SCHEMA));
-            }
-            (TRUTH_SCHEMA, _) => {
-                moments.entry(at).or_default().truth = Some(decode!(v1::GroundTruth, TRUTH_SCHEMA));
-            }
-            _ => {}
-        }
+        file_message(&message?, &mut entries, &mut moments)?;
     }
     let mut frames = Vec::with_capacity(entries.len());
     for entry in entries {
@@ -223,6 +134,106 @@ fn read_messages(bytes: &[u8]) -> Result<Vec<RecordedFrame>, Error> {
         return Err(Error::NoFrames);
     }
     Ok(frames)
+}
+
+/// Files one message: a whole `landing.v1.Frame` as an entry of its own, a part of a Foxglove
+/// frame into the moment of its log time. Other schemas, topics and encodings are skipped.
+fn file_message(
+    message: &mcap::Message<'_>,
+    entries: &mut Vec<Entry>,
+    moments: &mut BTreeMap<u64, Moment>,
+) -> Result<(), Error> {
+    let Some(schema) = message
+        .channel
+        .schema
+        .as_ref()
+        .filter(|s| s.encoding == "protobuf")
+        .map(|s| s.name.as_str())
+    else {
+        return Ok(());
+    };
+    let topic = message.channel.topic.as_str();
+    let at = message.log_time;
+    match (schema, topic) {
+        (FRAME_SCHEMA, _) => entries.push(Entry::Whole(Box::new(RecordedFrame {
+            topic: topic.to_string(),
+            log_time_ns: at,
+            frame: decode(message, FRAME_SCHEMA)?,
+            truth: None,
+            labels: None,
+        }))),
+        (FRAME_HEADER_SCHEMA, FRAME_TOPIC) => {
+            let header = decode(message, FRAME_HEADER_SCHEMA)?;
+            frame_moment(at, entries, moments).header = Some(header);
+        }
+        ("foxglove.PointCloud", LIDAR_TOPIC) => {
+            let cloud = decode(message, "foxglove.PointCloud")?;
+            frame_moment(at, entries, moments).cloud = Some((cloud, message.sequence));
+        }
+        ("foxglove.CompressedImage", CAMERA_TOPIC) => {
+            moments.entry(at).or_default().image = Some(Image::Compressed(decode(
+                message,
+                "foxglove.CompressedImage",
+            )?));
+        }
+        ("foxglove.RawImage", CAMERA_RAW_TOPIC) => {
+            moments.entry(at).or_default().image =
+                Some(Image::Raw(decode(message, "foxglove.RawImage")?));
+        }
+        ("foxglove.CameraCalibration", CALIBRATION_TOPIC) => {
+            moments.entry(at).or_default().calibration =
+                Some(decode(message, "foxglove.CameraCalibration")?);
+        }
+        ("foxglove.FrameTransforms", TF_TOPIC) => {
+            moments.entry(at).or_default().transforms =
+                Some(decode(message, "foxglove.FrameTransforms")?);
+        }
+        ("foxglove.CompressedImage", LABELS_TOPIC) => {
+            moments.entry(at).or_default().labels = Some(Image::Compressed(decode(
+                message,
+                "foxglove.CompressedImage",
+            )?));
+        }
+        ("foxglove.RawImage", LABELS_RAW_TOPIC) => {
+            moments.entry(at).or_default().labels =
+                Some(Image::Raw(decode(message, "foxglove.RawImage")?));
+        }
+        (LABELS_SCHEMA, LABELS_TOPIC) => {
+            moments.entry(at).or_default().legacy_labels = Some(decode(message, LABELS_SCHEMA)?);
+        }
+        (TRUTH_SCHEMA, _) => {
+            moments.entry(at).or_default().truth = Some(decode(message, TRUTH_SCHEMA)?);
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+/// The moment of log time `at` for a frame's header or cloud; the first of the two to come
+/// opens the frame's entry, so frames keep file order.
+fn frame_moment<'a>(
+    at: u64,
+    entries: &mut Vec<Entry>,
+    moments: &'a mut BTreeMap<u64, Moment>,
+) -> &'a mut Moment {
+    let m = moments.entry(at).or_default();
+    if m.header.is_none() && m.cloud.is_none() {
+        entries.push(Entry::Foxglove(at));
+    }
+    m
+}
+
+/// The message's data decoded as `schema`.
+fn decode<T: Message + Default>(
+    message: &mcap::Message<'_>,
+    schema: &'static str,
+) -> Result<T, Error> {
+    T::decode(&message.data[..]).map_err(|e| Error::Decode {
+        topic: message.channel.topic.clone(),
+        sequence: message.sequence,
+        schema,
+        reason: e.to_string(),
+    })
 }
 
 /// The frame of log time `at` from its Foxglove messages; the label image takes the camera's pose

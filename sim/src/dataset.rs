@@ -152,6 +152,35 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
         let p = dir.join(sub);
         std::fs::create_dir_all(&p).map_err(|e| SimError::io(&p, e))?;
     }
+    let rows = render_worlds(config, &intr, dir)?;
+    let mut totals = [0u64; SemanticClass::COUNT];
+    for r in &rows {
+        for (t, c) in totals.iter_mut().zip(r.counts) {
+            *t += c;
+        }
+    }
+    write_file(
+        &dir.join("manifest.csv"),
+        manifest_csv(config, &intr, &rows).as_bytes(),
+    )?;
+    write_file(
+        &dir.join("manifest.json"),
+        manifest_json(config, &intr, rows.len(), &totals).as_bytes(),
+    )?;
+    Ok(DatasetSummary {
+        dir: dir.to_path_buf(),
+        images: rows.len() as u32,
+        class_pixel_counts: totals,
+    })
+}
+
+/// Renders the images of every world into `dir` on [`DatasetConfig::jobs`] threads, world `wi`
+/// on thread `wi % jobs`; the rows in image order.
+fn render_worlds(
+    config: &DatasetConfig,
+    intr: &Intrinsics,
+    dir: &Path,
+) -> Result<Vec<Row>, SimError> {
     let worlds = config.images.div_ceil(config.images_per_world);
     let jobs = if config.jobs == 0 {
         std::thread::available_parallelism().map_or(1, |n| n.get())
@@ -168,7 +197,7 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
                     let mut rows = Vec::new();
                     let mut wi = job as u32;
                     while wi < worlds {
-                        rows.extend(world_images(config, &intr, dir, wi)?);
+                        rows.extend(world_images(config, intr, dir, wi)?);
                         wi += jobs as u32;
                     }
                     Ok(rows)
@@ -193,15 +222,15 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
         rows.extend(r?);
     }
     rows.sort_by_key(|r| r.index);
+    Ok(rows)
+}
 
-    let mut totals = [0u64; SemanticClass::COUNT];
+/// `manifest.csv`: one line per image with its view and the camera intrinsics.
+fn manifest_csv(config: &DatasetConfig, intr: &Intrinsics, rows: &[Row]) -> String {
     let mut csv = String::from(
         "index,image,label,split,world_seed,building,altitude_m,pitch_deg,yaw_deg,width,height,fx,fy,cx,cy,rooftop_fraction\n",
     );
-    for r in &rows {
-        for (t, c) in totals.iter_mut().zip(r.counts) {
-            *t += c;
-        }
+    for r in rows {
         csv.push_str(&format!(
             "{i},images/{i:06}.png,labels/{i:06}.png,{},{},{},{:.3},{:.3},{:.3},{},{},{:.6},{:.6},{:.6},{:.6},{:.4}\n",
             config.split.name(),
@@ -220,17 +249,26 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
             i = r.index,
         ));
     }
-    write_file(&dir.join("manifest.csv"), csv.as_bytes())?;
+    csv
+}
+
+/// `manifest.json`: the split, the camera, the class names and the pixel count of each class.
+fn manifest_json(
+    config: &DatasetConfig,
+    intr: &Intrinsics,
+    images: usize,
+    totals: &[u64; SemanticClass::COUNT],
+) -> String {
     let names: Vec<String> = SemanticClass::ALL
         .iter()
         .map(|c| format!("\"{}\"", c.name()))
         .collect();
     let counts: Vec<String> = totals.iter().map(u64::to_string).collect();
-    let json = format!(
+    format!(
         "{{\n  \"split\": \"{}\",\n  \"seed\": {},\n  \"images\": {},\n  \"width\": {},\n  \"height\": {},\n  \"fx\": {:.6},\n  \"fy\": {:.6},\n  \"cx\": {:.6},\n  \"cy\": {:.6},\n  \"asset_distribution\": \"{}\",\n  \"classes\": [{}],\n  \"class_pixel_counts\": [{}],\n  \"files\": \"manifest.csv\"\n}}\n",
         config.split.name(),
         config.seed,
-        rows.len(),
+        images,
         intr.width,
         intr.height,
         intr.fx,
@@ -243,13 +281,7 @@ pub fn write_dataset(config: &DatasetConfig, dir: &Path) -> Result<DatasetSummar
         },
         names.join(", "),
         counts.join(", "),
-    );
-    write_file(&dir.join("manifest.json"), json.as_bytes())?;
-    Ok(DatasetSummary {
-        dir: dir.to_path_buf(),
-        images: rows.len() as u32,
-        class_pixel_counts: totals,
-    })
+    )
 }
 
 fn world_images(

@@ -278,8 +278,6 @@ pub fn frame_messages(
     let ts = timestamp(f.sequence, config.flight.rate_hz);
     let cam_pose = pose_to_proto(&f.carried_camera_pose);
     let lidar_pose = pose_to_proto(&f.carried_lidar_pose);
-    let true_cam_pose = pose_to_proto(&f.view.camera);
-    let true_lidar_pose = pose_to_proto(&f.lidar_pose);
     let frame = v1::Frame {
         drone_id: config.drone_id.clone(),
         sequence: f.sequence,
@@ -292,78 +290,79 @@ pub fn frame_messages(
             fields: fields(),
             data: pack_points(&f.points),
         }),
-        image: Some(v1::CameraImage {
-            timestamp: Some(ts),
-            frame_id: "camera".to_string(),
-            pose: Some(cam_pose),
-            calibration: Some(calibration(&f.intrinsics)),
-            image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-                data: encode_rgb_png(&f.image)?,
-                format: "png".to_string(),
-            })),
-        }),
+        image: Some(camera_png(ts, cam_pose, f, encode_rgb_png(&f.image)?)),
         geodetic_origin: None,
         // The true labels travel on their own topic, so that a replay is segmented by the server.
         class_image: None,
     };
-    let labels = v1::CameraImage {
-        timestamp: Some(ts),
-        frame_id: "camera".to_string(),
-        pose: Some(cam_pose),
-        calibration: Some(calibration(&f.intrinsics)),
-        image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-            data: encode_label_png(&f.image)?,
-            format: "png".to_string(),
-        })),
-    };
-    let roofs = f
-        .roofs
-        .iter()
-        .map(|r| v1::RoofTruth {
-            building: r.building as u32,
-            outline: Some(ring(&r.outline, r.height_m)),
-            height_m: r.height_m,
-            parapet_height_m: r.parapet_height_m,
-            obstacles: r
-                .obstacles
-                .iter()
-                .map(|o| v1::ObstacleTruth {
-                    asset: o.kind.name().to_string(),
-                    semantic_class: i32::from(o.class),
-                    footprint: Some(ring(&o.footprint, r.height_m)),
-                    height_m: o.height_m,
-                    seen_by_lidar: o.seen_by_lidar,
-                })
-                .collect(),
-            landable_region: Some(v1::Polygon {
-                shell: Some(ring(&r.landable_region.shell, r.height_m)),
-                holes: r
-                    .landable_region
-                    .holes
-                    .iter()
-                    .map(|h| ring(h, r.height_m))
-                    .collect(),
-                plane_height_m: r.height_m,
-            }),
-            best_landing_point: Some(v1::Vector3 {
-                x: r.best_point[0],
-                y: r.best_point[1],
-                z: r.height_m,
-            }),
-            best_safe_radius_m: r.best_radius_m,
-            lidar_point_count: r.lidar_points as u32,
-        })
-        .collect();
+    let labels = camera_png(ts, cam_pose, f, encode_label_png(&f.image)?);
     let truth = v1::GroundTruth {
         sequence: f.sequence,
         timestamp: Some(ts),
         world_seed: world.seed,
         target_building: f.view.building as u32,
-        roofs,
-        camera_pose: Some(true_cam_pose),
-        lidar_pose: Some(true_lidar_pose),
+        roofs: f.roofs.iter().map(roof_truth).collect(),
+        camera_pose: Some(pose_to_proto(&f.view.camera)),
+        lidar_pose: Some(pose_to_proto(&f.lidar_pose)),
     };
     Ok((frame, truth, labels))
+}
+
+/// A PNG from the camera of frame `f`, at `ts` with pose `pose` and the camera's calibration.
+fn camera_png(
+    ts: prost_types::Timestamp,
+    pose: v1::Pose,
+    f: &SimFrame,
+    png: Vec<u8>,
+) -> v1::CameraImage {
+    v1::CameraImage {
+        timestamp: Some(ts),
+        frame_id: "camera".to_string(),
+        pose: Some(pose),
+        calibration: Some(calibration(&f.intrinsics)),
+        image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
+            data: png,
+            format: "png".to_string(),
+        })),
+    }
+}
+
+/// The ground truth of one roof as its message, every ring at the roof's height.
+fn roof_truth(r: &RoofTruth) -> v1::RoofTruth {
+    v1::RoofTruth {
+        building: r.building as u32,
+        outline: Some(ring(&r.outline, r.height_m)),
+        height_m: r.height_m,
+        parapet_height_m: r.parapet_height_m,
+        obstacles: r
+            .obstacles
+            .iter()
+            .map(|o| v1::ObstacleTruth {
+                asset: o.kind.name().to_string(),
+                semantic_class: i32::from(o.class),
+                footprint: Some(ring(&o.footprint, r.height_m)),
+                height_m: o.height_m,
+                seen_by_lidar: o.seen_by_lidar,
+            })
+            .collect(),
+        landable_region: Some(v1::Polygon {
+            shell: Some(ring(&r.landable_region.shell, r.height_m)),
+            holes: r
+                .landable_region
+                .holes
+                .iter()
+                .map(|h| ring(h, r.height_m))
+                .collect(),
+            plane_height_m: r.height_m,
+        }),
+        best_landing_point: Some(v1::Vector3 {
+            x: r.best_point[0],
+            y: r.best_point[1],
+            z: r.height_m,
+        }),
+        best_safe_radius_m: r.best_radius_m,
+        lidar_point_count: r.lidar_points as u32,
+    }
 }
 
 /// Simulates a flight and writes it as an MCAP file (zstd chunks). Returns the frame count.

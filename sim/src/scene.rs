@@ -158,174 +158,236 @@ impl Ray {
 /// Distance and normal of the nearest hit of `ray` with `shape` in `(T_EPS, t_max)`.
 pub fn intersect_shape(shape: &Shape, ray: &Ray, t_max: f32) -> Option<(f32, V3)> {
     match *shape {
-        Shape::Box { c, h, cos, sin } => {
-            let p = ray.o - c;
-            // Into the box frame: rotate by -yaw.
-            let o = V3::new(cos * p.x + sin * p.y, -sin * p.x + cos * p.y, p.z);
-            let d = V3::new(
-                cos * ray.d.x + sin * ray.d.y,
-                -sin * ray.d.x + cos * ray.d.y,
-                ray.d.z,
-            );
-            let mut t0 = f32::NEG_INFINITY;
-            let mut t1 = f32::INFINITY;
-            let mut axis0 = 0usize;
-            let mut sign0 = 0.0f32;
-            let mut axis1 = 0usize;
-            let mut sign1 = 0.0f32;
-            for i in 0..3 {
-                let (oi, di, hi) = (o.axis(i), d.axis(i), h.axis(i));
-                if di.abs() < 1e-12 {
-                    if oi.abs() > hi {
-                        return None;
-                    }
-                    continue;
-                }
-                let inv = 1.0 / di;
-                let mut ta = (-hi - oi) * inv;
-                let mut tb = (hi - oi) * inv;
-                let mut s = -1.0;
-                if ta > tb {
-                    std::mem::swap(&mut ta, &mut tb);
-                    s = 1.0;
-                }
-                if ta > t0 {
-                    t0 = ta;
-                    axis0 = i;
-                    sign0 = s;
-                }
-                if tb < t1 {
-                    t1 = tb;
-                    axis1 = i;
-                    sign1 = -s;
-                }
-                if t0 > t1 {
-                    return None;
-                }
-            }
-            let (t, axis, sign) = if t0 > T_EPS {
-                (t0, axis0, sign0)
-            } else if t1 > T_EPS {
-                // Inside the box: the exit face, normal facing the ray.
-                (t1, axis1, -sign1)
-            } else {
-                return None;
-            };
-            if t >= t_max {
+        Shape::Box { c, h, cos, sin } => intersect_box(c, h, cos, sin, ray, t_max),
+        Shape::Cylinder { cx, cy, r, z0, z1 } => intersect_cylinder(cx, cy, r, z0, z1, ray, t_max),
+        Shape::Cone { cx, cy, r, z0, z1 } => intersect_cone(cx, cy, r, z0, z1, ray, t_max),
+        Shape::Sphere { c, r } => intersect_sphere(c, r, ray, t_max),
+    }
+}
+
+/// Where a ray enters and leaves a box, from the slab test: the distance, the axis of the face
+/// and the sign of that face's outward normal, all in the box frame.
+struct SlabSpan {
+    t0: f32,
+    axis0: usize,
+    sign0: f32,
+    t1: f32,
+    axis1: usize,
+    sign1: f32,
+}
+
+/// The slab test of a ray (`o`, `d`) in the box frame against half extents `h`; `None` when it
+/// misses.
+#[inline]
+fn slab_span(o: V3, d: V3, h: V3) -> Option<SlabSpan> {
+    let mut span = SlabSpan {
+        t0: f32::NEG_INFINITY,
+        axis0: 0,
+        sign0: 0.0,
+        t1: f32::INFINITY,
+        axis1: 0,
+        sign1: 0.0,
+    };
+    for i in 0..3 {
+        let (oi, di, hi) = (o.axis(i), d.axis(i), h.axis(i));
+        if di.abs() < 1e-12 {
+            if oi.abs() > hi {
                 return None;
             }
-            let nl = match axis {
-                0 => V3::new(sign, 0.0, 0.0),
-                1 => V3::new(0.0, sign, 0.0),
-                _ => V3::new(0.0, 0.0, sign),
-            };
-            let n = V3::new(cos * nl.x - sin * nl.y, sin * nl.x + cos * nl.y, nl.z);
-            Some((t, n))
+            continue;
         }
-        Shape::Cylinder { cx, cy, r, z0, z1 } => {
-            let mut best: Option<(f32, V3)> = None;
-            let mut t_lim = t_max;
-            let (px, py) = (ray.o.x - cx, ray.o.y - cy);
-            let a = ray.d.x * ray.d.x + ray.d.y * ray.d.y;
-            if a > 1e-12 {
-                let b = px * ray.d.x + py * ray.d.y;
-                let cc = px * px + py * py - r * r;
-                let disc = b * b - a * cc;
-                if disc >= 0.0 {
-                    let sq = disc.sqrt();
-                    for t in [(-b - sq) / a, (-b + sq) / a] {
-                        if t > T_EPS && t < t_lim {
-                            let z = ray.o.z + t * ray.d.z;
-                            if z >= z0 && z <= z1 {
-                                let n =
-                                    V3::new(px + t * ray.d.x, py + t * ray.d.y, 0.0) * (1.0 / r);
-                                best = Some((t, n));
-                                t_lim = t;
-                                break;
-                            }
-                        }
-                    }
-                }
-            }
-            if ray.d.z.abs() > 1e-12 {
-                for (zc, nz) in [(z1, 1.0f32), (z0, -1.0f32)] {
-                    let t = (zc - ray.o.z) / ray.d.z;
-                    if t > T_EPS && t < t_lim {
-                        let x = px + t * ray.d.x;
-                        let y = py + t * ray.d.y;
-                        if x * x + y * y <= r * r {
-                            best = Some((t, V3::new(0.0, 0.0, nz)));
-                            t_lim = t;
-                        }
-                    }
-                }
-            }
-            best
+        let inv = 1.0 / di;
+        let mut ta = (-hi - oi) * inv;
+        let mut tb = (hi - oi) * inv;
+        let mut s = -1.0;
+        if ta > tb {
+            std::mem::swap(&mut ta, &mut tb);
+            s = 1.0;
         }
-        Shape::Cone { cx, cy, r, z0, z1 } => {
-            let mut best: Option<(f32, V3)> = None;
-            let mut t_lim = t_max;
-            let k = r / (z1 - z0);
-            let k2 = k * k;
-            let (px, py) = (ray.o.x - cx, ray.o.y - cy);
-            let zr = z1 - ray.o.z;
-            let dz = -ray.d.z;
-            let a = ray.d.x * ray.d.x + ray.d.y * ray.d.y - k2 * dz * dz;
-            let b = 2.0 * (px * ray.d.x + py * ray.d.y - k2 * zr * dz);
-            let c = px * px + py * py - k2 * zr * zr;
-            let mut roots = [f32::INFINITY; 2];
-            if a.abs() > 1e-9 {
-                let disc = b * b - 4.0 * a * c;
-                if disc >= 0.0 {
-                    let sq = disc.sqrt();
-                    let (r0, r1) = ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a));
-                    roots = if r0 < r1 { [r0, r1] } else { [r1, r0] };
-                }
-            } else if b.abs() > 1e-12 {
-                roots[0] = -c / b;
-            }
-            for t in roots {
+        if ta > span.t0 {
+            span.t0 = ta;
+            span.axis0 = i;
+            span.sign0 = s;
+        }
+        if tb < span.t1 {
+            span.t1 = tb;
+            span.axis1 = i;
+            span.sign1 = -s;
+        }
+        if span.t0 > span.t1 {
+            return None;
+        }
+    }
+    Some(span)
+}
+
+/// [`intersect_shape`] for a box with centre `c`, half extents `h`, turned by the yaw whose
+/// cosine and sine are `cos` and `sin`.
+#[inline]
+fn intersect_box(c: V3, h: V3, cos: f32, sin: f32, ray: &Ray, t_max: f32) -> Option<(f32, V3)> {
+    let p = ray.o - c;
+    // Into the box frame: rotate by -yaw.
+    let o = V3::new(cos * p.x + sin * p.y, -sin * p.x + cos * p.y, p.z);
+    let d = V3::new(
+        cos * ray.d.x + sin * ray.d.y,
+        -sin * ray.d.x + cos * ray.d.y,
+        ray.d.z,
+    );
+    let span = slab_span(o, d, h)?;
+    let (t, axis, sign) = if span.t0 > T_EPS {
+        (span.t0, span.axis0, span.sign0)
+    } else if span.t1 > T_EPS {
+        // Inside the box: the exit face, normal facing the ray.
+        (span.t1, span.axis1, -span.sign1)
+    } else {
+        return None;
+    };
+    if t >= t_max {
+        return None;
+    }
+    let nl = match axis {
+        0 => V3::new(sign, 0.0, 0.0),
+        1 => V3::new(0.0, sign, 0.0),
+        _ => V3::new(0.0, 0.0, sign),
+    };
+    let n = V3::new(cos * nl.x - sin * nl.y, sin * nl.x + cos * nl.y, nl.z);
+    Some((t, n))
+}
+
+/// [`intersect_shape`] for a vertical cylinder of radius `r` with axis at (`cx`, `cy`) from
+/// `z0` to `z1`: the side, then the caps.
+#[inline]
+fn intersect_cylinder(
+    cx: f32,
+    cy: f32,
+    r: f32,
+    z0: f32,
+    z1: f32,
+    ray: &Ray,
+    t_max: f32,
+) -> Option<(f32, V3)> {
+    let mut best: Option<(f32, V3)> = None;
+    let mut t_lim = t_max;
+    let (px, py) = (ray.o.x - cx, ray.o.y - cy);
+    let a = ray.d.x * ray.d.x + ray.d.y * ray.d.y;
+    if a > 1e-12 {
+        let b = px * ray.d.x + py * ray.d.y;
+        let cc = px * px + py * py - r * r;
+        let disc = b * b - a * cc;
+        if disc >= 0.0 {
+            let sq = disc.sqrt();
+            for t in [(-b - sq) / a, (-b + sq) / a] {
                 if t > T_EPS && t < t_lim {
                     let z = ray.o.z + t * ray.d.z;
                     if z >= z0 && z <= z1 {
-                        let x = px + t * ray.d.x;
-                        let y = py + t * ray.d.y;
-                        let n = V3::new(x, y, k2 * (z1 - z)).normalized();
+                        let n = V3::new(px + t * ray.d.x, py + t * ray.d.y, 0.0) * (1.0 / r);
                         best = Some((t, n));
                         t_lim = t;
                         break;
                     }
                 }
             }
-            if ray.d.z.abs() > 1e-12 {
-                let t = (z0 - ray.o.z) / ray.d.z;
-                if t > T_EPS && t < t_lim {
-                    let x = px + t * ray.d.x;
-                    let y = py + t * ray.d.y;
-                    if x * x + y * y <= r * r {
-                        best = Some((t, V3::new(0.0, 0.0, -1.0)));
-                    }
-                }
-            }
-            best
-        }
-        Shape::Sphere { c, r } => {
-            let p = ray.o - c;
-            let b = p.dot(ray.d);
-            let cc = p.dot(p) - r * r;
-            let disc = b * b - cc;
-            if disc < 0.0 {
-                return None;
-            }
-            let sq = disc.sqrt();
-            for t in [-b - sq, -b + sq] {
-                if t > T_EPS && t < t_max {
-                    return Some((t, (p + ray.d * t) * (1.0 / r)));
-                }
-            }
-            None
         }
     }
+    if ray.d.z.abs() > 1e-12 {
+        for (zc, nz) in [(z1, 1.0f32), (z0, -1.0f32)] {
+            let t = (zc - ray.o.z) / ray.d.z;
+            if t > T_EPS && t < t_lim {
+                let x = px + t * ray.d.x;
+                let y = py + t * ray.d.y;
+                if x * x + y * y <= r * r {
+                    best = Some((t, V3::new(0.0, 0.0, nz)));
+                    t_lim = t;
+                }
+            }
+        }
+    }
+    best
+}
+
+/// [`intersect_shape`] for a vertical cone of base radius `r` at `z0` with its apex at `z1`,
+/// axis at (`cx`, `cy`): the mantle, then the base.
+#[inline]
+fn intersect_cone(
+    cx: f32,
+    cy: f32,
+    r: f32,
+    z0: f32,
+    z1: f32,
+    ray: &Ray,
+    t_max: f32,
+) -> Option<(f32, V3)> {
+    let mut best: Option<(f32, V3)> = None;
+    let mut t_lim = t_max;
+    let k = r / (z1 - z0);
+    let k2 = k * k;
+    let (px, py) = (ray.o.x - cx, ray.o.y - cy);
+    let zr = z1 - ray.o.z;
+    let dz = -ray.d.z;
+    let a = ray.d.x * ray.d.x + ray.d.y * ray.d.y - k2 * dz * dz;
+    let b = 2.0 * (px * ray.d.x + py * ray.d.y - k2 * zr * dz);
+    let c = px * px + py * py - k2 * zr * zr;
+    for t in quadratic_roots(a, b, c) {
+        if t > T_EPS && t < t_lim {
+            let z = ray.o.z + t * ray.d.z;
+            if z >= z0 && z <= z1 {
+                let x = px + t * ray.d.x;
+                let y = py + t * ray.d.y;
+                let n = V3::new(x, y, k2 * (z1 - z)).normalized();
+                best = Some((t, n));
+                t_lim = t;
+                break;
+            }
+        }
+    }
+    if ray.d.z.abs() > 1e-12 {
+        let t = (z0 - ray.o.z) / ray.d.z;
+        if t > T_EPS && t < t_lim {
+            let x = px + t * ray.d.x;
+            let y = py + t * ray.d.y;
+            if x * x + y * y <= r * r {
+                best = Some((t, V3::new(0.0, 0.0, -1.0)));
+            }
+        }
+    }
+    best
+}
+
+/// The real roots of `a t² + b t + c = 0` in increasing order, padded with infinity (the one
+/// root of the linear equation when `a` is about zero).
+#[inline]
+fn quadratic_roots(a: f32, b: f32, c: f32) -> [f32; 2] {
+    let mut roots = [f32::INFINITY; 2];
+    if a.abs() > 1e-9 {
+        let disc = b * b - 4.0 * a * c;
+        if disc >= 0.0 {
+            let sq = disc.sqrt();
+            let (r0, r1) = ((-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a));
+            roots = if r0 < r1 { [r0, r1] } else { [r1, r0] };
+        }
+    } else if b.abs() > 1e-12 {
+        roots[0] = -c / b;
+    }
+    roots
+}
+
+/// [`intersect_shape`] for a sphere with centre `c` and radius `r`.
+#[inline]
+fn intersect_sphere(c: V3, r: f32, ray: &Ray, t_max: f32) -> Option<(f32, V3)> {
+    let p = ray.o - c;
+    let b = p.dot(ray.d);
+    let cc = p.dot(p) - r * r;
+    let disc = b * b - cc;
+    if disc < 0.0 {
+        return None;
+    }
+    let sq = disc.sqrt();
+    for t in [-b - sq, -b + sq] {
+        if t > T_EPS && t < t_max {
+            return Some((t, (p + ray.d * t) * (1.0 / r)));
+        }
+    }
+    None
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -368,27 +430,85 @@ fn sah_split(
 ) -> Option<usize> {
     let n = idx.len();
     let mut best = (f32::INFINITY, 0usize, 0usize);
-    let mut node_lo = V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY);
-    let mut node_hi = -node_lo;
-    for &i in idx.iter() {
-        node_lo = node_lo.min(bounds[i as usize].0);
-        node_hi = node_hi.max(bounds[i as usize].1);
-    }
     for axis in 0..3 {
+        let Some(bins) = Bins::along(axis, clo, chi) else {
+            continue;
+        };
+        let (cost, k) = bins.cheapest_split(idx, bounds, centroids);
+        if cost < best.0 {
+            best = (cost, axis, k);
+        }
+    }
+    if !best.0.is_finite() {
+        // Identical centroids: split by count.
+        return Some(n / 2);
+    }
+    let (node_lo, node_hi) = union_bounds(idx, bounds);
+    let leaf_cost = area(node_lo, node_hi) * n as f32;
+    if n <= 4 && best.0 / 1.0 + area(node_lo, node_hi) * 0.5 >= leaf_cost {
+        return None;
+    }
+    let (_, axis, k) = best;
+    let bins = Bins::along(axis, clo, chi).expect("the split axis has an extent");
+    let mut left = 0usize;
+    for j in 0..n {
+        if bins.of(centroids[idx[j] as usize]) <= k {
+            idx.swap(left, j);
+            left += 1;
+        }
+    }
+    Some(left)
+}
+
+/// The bounding box of the primitives `idx`.
+fn union_bounds(idx: &[u32], bounds: &[(V3, V3)]) -> (V3, V3) {
+    let mut lo = V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY);
+    let mut hi = -lo;
+    for &i in idx {
+        lo = lo.min(bounds[i as usize].0);
+        hi = hi.max(bounds[i as usize].1);
+    }
+    (lo, hi)
+}
+
+/// `BINS` equal bins of the centroid range along one axis.
+struct Bins {
+    axis: usize,
+    start: f32,
+    scale: f32,
+}
+
+impl Bins {
+    /// The bins over `clo..chi` along `axis`, or `None` when the centroids do not spread on it.
+    fn along(axis: usize, clo: V3, chi: V3) -> Option<Self> {
         let (a, b) = (clo.axis(axis), chi.axis(axis));
         if b - a <= 1e-6 {
-            continue;
+            return None;
         }
-        let scale = BINS as f32 / (b - a);
-        let bin_of =
-            |i: u32| (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
+        Some(Self {
+            axis,
+            start: a,
+            scale: BINS as f32 / (b - a),
+        })
+    }
+
+    /// The bin of a centroid.
+    fn of(&self, centroid: V3) -> usize {
+        (((centroid.axis(self.axis) - self.start) * self.scale) as usize).min(BINS - 1)
+    }
+
+    /// The cheapest split between bins `..=k` and `k + 1..`, as (cost, k), that leaves
+    /// primitives on both sides; an infinite cost when every such split puts all of them on one
+    /// side.
+    fn cheapest_split(&self, idx: &[u32], bounds: &[(V3, V3)], centroids: &[V3]) -> (f32, usize) {
+        let n = idx.len();
         let empty = (
             V3::new(f32::INFINITY, f32::INFINITY, f32::INFINITY),
             V3::new(f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY),
         );
         let mut bins = [(empty, 0usize); BINS];
-        for &i in idx.iter() {
-            let k = bin_of(i);
+        for &i in idx {
+            let k = self.of(centroids[i as usize]);
             let (lo, hi) = bounds[i as usize];
             bins[k].0 = (bins[k].0.0.min(lo), bins[k].0.1.max(hi));
             bins[k].1 += 1;
@@ -405,6 +525,7 @@ fn sah_split(
                 0.0
             };
         }
+        let mut best = (f32::INFINITY, 0usize);
         let mut acc = empty;
         let mut cnt = 0usize;
         for k in 0..BINS - 1 {
@@ -415,31 +536,11 @@ fn sah_split(
             }
             let cost = area(acc.0, acc.1) * cnt as f32 + right_cost[k + 1];
             if cost < best.0 {
-                best = (cost, axis, k);
+                best = (cost, k);
             }
         }
+        best
     }
-    if !best.0.is_finite() {
-        // Identical centroids: split by count.
-        return Some(n / 2);
-    }
-    let leaf_cost = area(node_lo, node_hi) * n as f32;
-    if n <= 4 && best.0 / 1.0 + area(node_lo, node_hi) * 0.5 >= leaf_cost {
-        return None;
-    }
-    let (_, axis, k) = best;
-    let (a, b) = (clo.axis(axis), chi.axis(axis));
-    let scale = BINS as f32 / (b - a);
-    let mut left = 0usize;
-    for j in 0..n {
-        let i = idx[j];
-        let bin = (((centroids[i as usize].axis(axis) - a) * scale) as usize).min(BINS - 1);
-        if bin <= k {
-            idx.swap(left, j);
-            left += 1;
-        }
-    }
-    Some(left)
 }
 
 impl Bvh {

@@ -7,7 +7,7 @@ use landing_geometry::polylabel::{PolylabelParams, polylabel};
 use crate::SimError;
 use crate::assets::AssetKind;
 use crate::lidar::LidarPoint;
-use crate::world::World;
+use crate::world::{Building, World};
 
 /// Options of [`ground_truth`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,20 +64,7 @@ pub fn ground_truth(
     target: usize,
     config: &TruthConfig,
 ) -> Result<Vec<RoofTruth>, SimError> {
-    let mut per_building: Vec<Vec<[f64; 2]>> = vec![Vec::new(); world.buildings.len()];
-    let mut seen_assets = vec![false; world.assets.len()];
-    for p in points {
-        let bi = p.building as usize;
-        if bi >= world.buildings.len() {
-            continue;
-        }
-        if (p.asset as usize) < seen_assets.len() {
-            seen_assets[p.asset as usize] = true;
-        }
-        if p.world[2] >= world.buildings[bi].height_m - 0.1 {
-            per_building[bi].push([p.world[0], p.world[1]]);
-        }
-    }
+    let (per_building, seen_assets) = roof_hits(world, points);
     let mut order: Vec<usize> = (0..world.buildings.len())
         .filter(|&i| per_building[i].len() >= config.min_points)
         .collect();
@@ -89,44 +76,8 @@ pub fn ground_truth(
     let mut roofs = Vec::new();
     for bi in order {
         let b = &world.buildings[bi];
-        let hull = convex_hull(&per_building[bi]);
-        let shell = if hull.len() >= 3 {
-            clip_convex(&b.roof_interior(), &hull)
-        } else {
-            Vec::new()
-        };
-        let obstacles: Vec<ObstacleTruth> = b
-            .assets
-            .iter()
-            .map(|&ai| {
-                let a = &world.assets[ai];
-                ObstacleTruth {
-                    asset: ai,
-                    kind: a.kind,
-                    class: a.kind.class() as u8,
-                    footprint: a.footprint(),
-                    height_m: a.height_m,
-                    seen_by_lidar: seen_assets[ai],
-                }
-            })
-            .collect();
-        let mut holes = Vec::new();
-        if shell.len() >= 3 {
-            for o in &obstacles {
-                let mut h = clip_convex(&o.footprint, &shell);
-                if h.len() >= 3 && ring_area(&h).abs() > 1e-6 {
-                    h.reverse();
-                    holes.push(h);
-                }
-            }
-        }
-        // Spelled with a default tail so that fields the geometry crate adds keep their defaults.
-        #[allow(clippy::needless_update)]
-        let landable_region = Polygon {
-            shell,
-            holes,
-            ..Default::default()
-        };
+        let obstacles = obstacles_on(world, bi, &seen_assets);
+        let landable_region = landable_region(b, &per_building[bi], &obstacles);
         let (best_point, best_radius_m) = if landable_region.shell.len() >= 3 {
             let pole = polylabel(&landable_region, &params)
                 .map_err(|e| SimError::Geometry(e.to_string()))?;
@@ -147,6 +98,73 @@ pub fn ground_truth(
         });
     }
     Ok(roofs)
+}
+
+/// Where the scan hits each roof at its level (x, y per building), and which assets it hits.
+fn roof_hits(world: &World, points: &[LidarPoint]) -> (Vec<Vec<[f64; 2]>>, Vec<bool>) {
+    let mut per_building: Vec<Vec<[f64; 2]>> = vec![Vec::new(); world.buildings.len()];
+    let mut seen_assets = vec![false; world.assets.len()];
+    for p in points {
+        let bi = p.building as usize;
+        if bi >= world.buildings.len() {
+            continue;
+        }
+        if (p.asset as usize) < seen_assets.len() {
+            seen_assets[p.asset as usize] = true;
+        }
+        if p.world[2] >= world.buildings[bi].height_m - 0.1 {
+            per_building[bi].push([p.world[0], p.world[1]]);
+        }
+    }
+    (per_building, seen_assets)
+}
+
+/// The assets on building `bi`, each seen when the scan hit it.
+fn obstacles_on(world: &World, bi: usize, seen_assets: &[bool]) -> Vec<ObstacleTruth> {
+    world.buildings[bi]
+        .assets
+        .iter()
+        .map(|&ai| {
+            let a = &world.assets[ai];
+            ObstacleTruth {
+                asset: ai,
+                kind: a.kind,
+                class: a.kind.class() as u8,
+                footprint: a.footprint(),
+                height_m: a.height_m,
+                seen_by_lidar: seen_assets[ai],
+            }
+        })
+        .collect()
+}
+
+/// The roof interior of `b` within the convex hull of the scan's `hits` on it, the obstacle
+/// footprints clipped to it as clockwise holes (empty when the scan covers no area).
+// The polygon is spelled with a default tail so that fields the geometry crate adds keep their
+// defaults.
+#[allow(clippy::needless_update)]
+fn landable_region(b: &Building, hits: &[[f64; 2]], obstacles: &[ObstacleTruth]) -> Polygon {
+    let hull = convex_hull(hits);
+    let shell = if hull.len() >= 3 {
+        clip_convex(&b.roof_interior(), &hull)
+    } else {
+        Vec::new()
+    };
+    let mut holes = Vec::new();
+    if shell.len() >= 3 {
+        for o in obstacles {
+            let mut h = clip_convex(&o.footprint, &shell);
+            if h.len() >= 3 && ring_area(&h).abs() > 1e-6 {
+                h.reverse();
+                holes.push(h);
+            }
+        }
+    }
+    Polygon {
+        shell,
+        holes,
+        ..Default::default()
+    }
 }
 
 /// Signed area (positive for counter-clockwise).

@@ -228,91 +228,21 @@ impl World {
     pub fn generate(seed: u64, config: &WorldConfig) -> Result<World, SimError> {
         config.validate()?;
         let mut rng = SmallRng::seed_from_u64(seed ^ 0x5157_4f52_4c44_0001);
-        let period = config.block_size_m + config.street_width_m;
-        let mut buildings = Vec::new();
-        for bx in 0..config.blocks_x {
-            for by in 0..config.blocks_y {
-                let x0 = f64::from(bx) * period + config.street_width_m / 2.0;
-                let y0 = f64::from(by) * period + config.street_width_m / 2.0;
-                let mut lots = Vec::new();
-                split_lot(
-                    [x0, y0],
-                    [x0 + config.block_size_m, y0 + config.block_size_m],
-                    &mut rng,
-                    0,
-                    &mut lots,
-                );
-                for (lo, hi) in lots {
-                    let mut setback = [0.0f64; 4];
-                    for s in &mut setback {
-                        *s = if rng.random_bool(0.4) {
-                            0.0
-                        } else {
-                            rng.random_range(0.5..3.0)
-                        };
-                    }
-                    let min = [lo[0] + setback[0], lo[1] + setback[1]];
-                    let max = [hi[0] - setback[2], hi[1] - setback[3]];
-                    if max[0] - min[0] < 8.0 || max[1] - min[1] < 8.0 {
-                        continue;
-                    }
-                    let (hlo, hhi) = config.height_range_m;
-                    let height_m = if hhi > hlo {
-                        rng.random_range(hlo..hhi)
-                    } else {
-                        hlo
-                    };
-                    let has_parapet = rng.random_bool(0.8);
-                    buildings.push(Building {
-                        min,
-                        max,
-                        height_m: (height_m * 4.0).round() / 4.0,
-                        parapet_height_m: if has_parapet {
-                            rng.random_range(0.3..1.1)
-                        } else {
-                            0.0
-                        },
-                        parapet_thickness_m: if has_parapet {
-                            rng.random_range(0.2..0.45)
-                        } else {
-                            0.0
-                        },
-                        assets: Vec::new(),
-                    });
-                }
-            }
-        }
-
+        let mut buildings = lay_out_buildings(config, &mut rng);
         let mut prims = Vec::new();
         let mut assets = Vec::new();
         let mut dropped = 0usize;
-        // Indexing: the loop pushes asset indices into `buildings[bi]` while reading it.
-        #[allow(clippy::needless_range_loop)]
         for bi in 0..buildings.len() {
             building_prims(&buildings[bi], bi as u32, &mut rng, &mut prims);
-            let counts = sample_counts(config.assets, &mut rng);
-            // Big things first, so the small ones fill the gaps.
-            let mut todo: Vec<AssetKind> = Vec::new();
-            for (i, kind) in AssetKind::ALL.iter().enumerate() {
-                todo.extend(std::iter::repeat_n(*kind, counts[i] as usize));
-            }
-            todo.sort_by_key(|k| std::cmp::Reverse((footprint_rank(*k), *k)));
-            for kind in todo {
-                let b = &buildings[bi];
-                match place_asset(kind, b, bi, &assets, &mut rng) {
-                    Some(asset) => {
-                        let ai = assets.len();
-                        asset_prims(
-                            &asset, b.height_m, bi as u32, ai as u32, &mut rng, &mut prims,
-                        );
-                        buildings[bi].assets.push(ai);
-                        assets.push(asset);
-                    }
-                    None => dropped += 1,
-                }
-            }
+            dropped += furnish_roof(
+                &mut buildings,
+                bi,
+                config,
+                &mut assets,
+                &mut rng,
+                &mut prims,
+            );
         }
-
         let sun_az = rng.random_range(0.0..std::f32::consts::TAU);
         let sun_el = rng.random_range(35f32..75.0).to_radians();
         let sun_dir = V3::new(
@@ -342,6 +272,109 @@ impl World {
     pub fn block_period_m(&self) -> f64 {
         self.config.block_size_m + self.config.street_width_m
     }
+}
+
+/// The buildings of the street grid, block by block, each block split into lots; no assets yet.
+fn lay_out_buildings(config: &WorldConfig, rng: &mut SmallRng) -> Vec<Building> {
+    let period = config.block_size_m + config.street_width_m;
+    let mut buildings = Vec::new();
+    for bx in 0..config.blocks_x {
+        for by in 0..config.blocks_y {
+            let x0 = f64::from(bx) * period + config.street_width_m / 2.0;
+            let y0 = f64::from(by) * period + config.street_width_m / 2.0;
+            let mut lots = Vec::new();
+            split_lot(
+                [x0, y0],
+                [x0 + config.block_size_m, y0 + config.block_size_m],
+                rng,
+                0,
+                &mut lots,
+            );
+            for (lo, hi) in lots {
+                buildings.extend(building_on_lot(lo, hi, config, rng));
+            }
+        }
+    }
+    buildings
+}
+
+/// A building on the lot `lo..hi`, set back from its edges, or `None` when what is left is
+/// narrower than 8 m.
+fn building_on_lot(
+    lo: [f64; 2],
+    hi: [f64; 2],
+    config: &WorldConfig,
+    rng: &mut SmallRng,
+) -> Option<Building> {
+    let mut setback = [0.0f64; 4];
+    for s in &mut setback {
+        *s = if rng.random_bool(0.4) {
+            0.0
+        } else {
+            rng.random_range(0.5..3.0)
+        };
+    }
+    let min = [lo[0] + setback[0], lo[1] + setback[1]];
+    let max = [hi[0] - setback[2], hi[1] - setback[3]];
+    if max[0] - min[0] < 8.0 || max[1] - min[1] < 8.0 {
+        return None;
+    }
+    let (hlo, hhi) = config.height_range_m;
+    let height_m = if hhi > hlo {
+        rng.random_range(hlo..hhi)
+    } else {
+        hlo
+    };
+    let has_parapet = rng.random_bool(0.8);
+    Some(Building {
+        min,
+        max,
+        height_m: (height_m * 4.0).round() / 4.0,
+        parapet_height_m: if has_parapet {
+            rng.random_range(0.3..1.1)
+        } else {
+            0.0
+        },
+        parapet_thickness_m: if has_parapet {
+            rng.random_range(0.2..0.45)
+        } else {
+            0.0
+        },
+        assets: Vec::new(),
+    })
+}
+
+/// Samples the assets of roof `bi` and places them, big things first so the small ones fill
+/// the gaps, appending them to `assets` (and their indices to the building) and their
+/// primitives to `prims`. Returns how many did not fit.
+fn furnish_roof(
+    buildings: &mut [Building],
+    bi: usize,
+    config: &WorldConfig,
+    assets: &mut Vec<Asset>,
+    rng: &mut SmallRng,
+    prims: &mut Vec<Prim>,
+) -> usize {
+    let counts = sample_counts(config.assets, rng);
+    let mut todo: Vec<AssetKind> = Vec::new();
+    for (i, kind) in AssetKind::ALL.iter().enumerate() {
+        todo.extend(std::iter::repeat_n(*kind, counts[i] as usize));
+    }
+    todo.sort_by_key(|k| std::cmp::Reverse((footprint_rank(*k), *k)));
+    let mut dropped = 0;
+    for kind in todo {
+        let b = &buildings[bi];
+        match place_asset(kind, b, bi, assets, rng) {
+            Some(asset) => {
+                let ai = assets.len();
+                asset_prims(&asset, b.height_m, bi as u32, ai as u32, rng, prims);
+                buildings[bi].assets.push(ai);
+                assets.push(asset);
+            }
+            None => dropped += 1,
+        }
+    }
+    dropped
 }
 
 fn rect(min: [f64; 2], max: [f64; 2]) -> Vec<[f64; 2]> {
@@ -694,6 +727,7 @@ impl Placer {
     }
 }
 
+/// The primitives of asset `a` (number `ai`, on building `bi` with its roof at `roof_z`).
 fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out: &mut Vec<Prim>) {
     let (s, c) = a.yaw.sin_cos();
     let p = Placer {
@@ -706,132 +740,185 @@ fn asset_prims(a: &Asset, roof_z: f64, bi: u32, ai: u32, rng: &mut SmallRng, out
         building: bi,
         asset: ai,
     };
-    let hx = a.half_extents[0] as f32;
-    let hy = a.half_extents[1] as f32;
-    let h = a.height_m as f32;
-    let metal = |rng: &mut SmallRng| material(rng, [0.72, 0.73, 0.75], Texture::Metal);
+    // Half extents in the asset's frame and height, metres.
+    let size = [
+        a.half_extents[0] as f32,
+        a.half_extents[1] as f32,
+        a.height_m as f32,
+    ];
     match a.kind {
-        AssetKind::AirVents => {
-            let m = material(rng, [0.78, 0.78, 0.80], Texture::Metal);
-            let r = hx / 1.4;
-            if rng.random_bool(0.6) {
-                out.push(p.cylinder(0.0, 0.0, r, 0.0, h - 0.15, m));
-                out.push(p.cone(0.0, 0.0, hx, h - 0.25, h, m));
-            } else {
-                out.push(p.cuboid(0.0, 0.0, hx * 0.8, hy * 0.8, 0.0, h * 0.8, m));
-                out.push(p.cuboid(0.0, 0.0, hx, hy, h * 0.8, h, m));
-            }
-        }
-        AssetKind::SmallRooftopEntrance => {
-            let looks = [[0.60, 0.55, 0.50], [0.50, 0.30, 0.24], [0.75, 0.74, 0.70]];
-            let look = looks[rng.random_range(0..looks.len())];
-            let m = material(rng, look, Texture::Plain);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
-            // Roof slab overhang and a door on the +x side.
-            let slab = material(rng, [0.4, 0.4, 0.42], Texture::Plain);
-            out.push(p.cuboid(0.0, 0.0, hx + 0.1, hy + 0.1, h, h + 0.15, slab));
-            let door = material(rng, [0.25, 0.22, 0.2], Texture::Metal);
-            out.push(p.cuboid(hx, 0.0, 0.05, 0.45, 0.0, 2.0_f32.min(h - 0.2), door));
-        }
-        AssetKind::Skylight => {
-            let frame = material(rng, [0.55, 0.55, 0.57], Texture::Metal);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h * 0.5, frame));
-            let glass = material(rng, [0.35, 0.50, 0.62], Texture::Glass);
-            out.push(p.cuboid(0.0, 0.0, hx * 0.92, hy * 0.92, h * 0.5, h, glass));
-        }
-        AssetKind::SmallBuilding => {
-            let (wl, wt) = WALL_LOOKS[rng.random_range(0..WALL_LOOKS.len())];
-            let wall = material(rng, wl, wt);
-            let (rl, rt) = ROOF_LOOKS[rng.random_range(0..ROOF_LOOKS.len())];
-            let roof = material(rng, rl, rt);
-            let mut body = p.cuboid(0.0, 0.0, hx, hy, 0.0, h, roof);
-            body.side_material = wall;
-            body.top_class = SemanticClass::BuildingRooftop as u8;
-            body.side_class = SemanticClass::BuildingWall as u8;
-            out.push(body);
-        }
-        AssetKind::AcUnit => {
-            let m = metal(rng);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
-            let fan = material(rng, [0.15, 0.15, 0.16], Texture::Plain);
-            let n = if hy > 0.9 { 2 } else { 1 };
-            for k in 0..n {
-                let ly = if n == 1 { 0.0 } else { (k as f32 - 0.5) * hy };
-                out.push(p.cylinder(0.0, ly, hx.min(hy / n as f32) * 0.75, h, h + 0.08, fan));
-            }
-        }
-        AssetKind::Seating => {
-            let wood = material(rng, [0.50, 0.34, 0.20], Texture::Wood);
-            out.push(p.cylinder(0.0, 0.0, 0.06, 0.0, 0.72, wood));
-            out.push(p.cylinder(0.0, 0.0, 0.55, 0.72, 0.77, wood));
-            for side in [-1.0f32, 1.0] {
-                out.push(p.cuboid(0.0, side * (hy - 0.25), hx * 0.8, 0.22, 0.0, 0.45, wood));
-                out.push(p.cuboid(0.0, side * (hy - 0.05), hx * 0.8, 0.05, 0.45, 0.9, wood));
-            }
-        }
-        AssetKind::AirDucts => {
-            let m = metal(rng);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.15, h, m));
-            for k in [-0.8f32, 0.0, 0.8] {
-                out.push(p.cuboid(k * hx, 0.0, 0.08, hy, 0.0, 0.15, m));
-            }
-        }
-        AssetKind::WaterTower => {
-            let wood = material(rng, [0.45, 0.32, 0.22], Texture::Wood);
-            let steel = material(rng, [0.30, 0.28, 0.27], Texture::Metal);
-            let r = hx - 0.1;
-            let legs = h * rng.random_range(0.3..0.45);
-            let leg = 0.7 * r;
-            for (lx, ly) in [(leg, leg), (-leg, leg), (leg, -leg), (-leg, -leg)] {
-                out.push(p.cuboid(lx, ly, 0.12, 0.12, 0.0, legs, steel));
-            }
-            out.push(p.cuboid(0.0, 0.0, r * 0.95, r * 0.95, legs, legs + 0.15, steel));
-            let roof_h = (h - legs) * 0.2;
-            out.push(p.cylinder(0.0, 0.0, r, legs + 0.15, h - roof_h, wood));
-            out.push(p.cone(0.0, 0.0, r + 0.1, h - roof_h, h, steel));
-        }
-        AssetKind::Chimney => {
-            if rng.random_bool(0.6) {
-                let brick = material(rng, [0.55, 0.28, 0.2], Texture::Brick);
-                out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, brick));
-            } else {
-                let m = material(rng, [0.45, 0.45, 0.47], Texture::Metal);
-                out.push(p.cylinder(0.0, 0.0, hx * 0.8, 0.0, h, m));
-                out.push(p.cone(0.0, 0.0, hx, h, h + 0.3, m));
-            }
-        }
-        AssetKind::EnclosedWaterTower => {
-            let looks = [[0.70, 0.70, 0.68], [0.45, 0.32, 0.22], [0.40, 0.45, 0.42]];
-            let look = looks[rng.random_range(0..looks.len())];
-            let m = material(rng, look, Texture::Metal);
-            let base = material(rng, [0.5, 0.5, 0.5], Texture::Plain);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, 0.6, base));
-            out.push(p.cylinder(0.0, 0.0, hx * 0.98, 0.6, h - 0.6, m));
-            out.push(p.cone(0.0, 0.0, hx, h - 0.6, h, m));
-        }
-        AssetKind::Tarp => {
-            let looks = [
-                [0.15, 0.30, 0.65],
-                [0.20, 0.45, 0.25],
-                [0.55, 0.55, 0.50],
-                [0.60, 0.40, 0.15],
-            ];
-            let look = looks[rng.random_range(0..looks.len())];
-            let m = material(rng, look, Texture::Plain);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
-        }
-        AssetKind::Vegetation => {
-            let planter = material(rng, [0.45, 0.38, 0.30], Texture::Wood);
-            out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, 0.4, planter));
-            let leaves = material(rng, [0.20, 0.42, 0.15], Texture::Foliage);
-            let n = rng.random_range(3..8);
-            for _ in 0..n {
-                let r = rng.random_range(0.3f32..0.75).min(hx.min(hy));
-                let lx = rng.random_range(-(hx - r).max(0.0)..=(hx - r).max(0.0));
-                let ly = rng.random_range(-(hy - r).max(0.0)..=(hy - r).max(0.0));
-                out.push(p.sphere(lx, ly, 0.4 + r * 0.8, r, leaves));
-            }
-        }
+        AssetKind::AirVents => air_vents(&p, size, rng, out),
+        AssetKind::SmallRooftopEntrance => small_rooftop_entrance(&p, size, rng, out),
+        AssetKind::Skylight => skylight(&p, size, rng, out),
+        AssetKind::SmallBuilding => small_building(&p, size, rng, out),
+        AssetKind::AcUnit => ac_unit(&p, size, rng, out),
+        AssetKind::Seating => seating(&p, size, rng, out),
+        AssetKind::AirDucts => air_ducts(&p, size, rng, out),
+        AssetKind::WaterTower => water_tower(&p, size, rng, out),
+        AssetKind::Chimney => chimney(&p, size, rng, out),
+        AssetKind::EnclosedWaterTower => enclosed_water_tower(&p, size, rng, out),
+        AssetKind::Tarp => tarp(&p, size, rng, out),
+        AssetKind::Vegetation => vegetation(&p, size, rng, out),
+    }
+}
+
+/// The ribbed sheet metal of AC units and air ducts.
+fn sheet_metal(rng: &mut SmallRng) -> Material {
+    material(rng, [0.72, 0.73, 0.75], Texture::Metal)
+}
+
+/// A round vent with a conical hood, or a square one with a wider cap.
+fn air_vents(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let m = material(rng, [0.78, 0.78, 0.80], Texture::Metal);
+    let r = hx / 1.4;
+    if rng.random_bool(0.6) {
+        out.push(p.cylinder(0.0, 0.0, r, 0.0, h - 0.15, m));
+        out.push(p.cone(0.0, 0.0, hx, h - 0.25, h, m));
+    } else {
+        out.push(p.cuboid(0.0, 0.0, hx * 0.8, hy * 0.8, 0.0, h * 0.8, m));
+        out.push(p.cuboid(0.0, 0.0, hx, hy, h * 0.8, h, m));
+    }
+}
+
+/// A stair or lift housing with a roof slab and a door on its +x side.
+fn small_rooftop_entrance(
+    p: &Placer,
+    [hx, hy, h]: [f32; 3],
+    rng: &mut SmallRng,
+    out: &mut Vec<Prim>,
+) {
+    let looks = [[0.60, 0.55, 0.50], [0.50, 0.30, 0.24], [0.75, 0.74, 0.70]];
+    let look = looks[rng.random_range(0..looks.len())];
+    let m = material(rng, look, Texture::Plain);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
+    // Roof slab overhang and a door on the +x side.
+    let slab = material(rng, [0.4, 0.4, 0.42], Texture::Plain);
+    out.push(p.cuboid(0.0, 0.0, hx + 0.1, hy + 0.1, h, h + 0.15, slab));
+    let door = material(rng, [0.25, 0.22, 0.2], Texture::Metal);
+    out.push(p.cuboid(hx, 0.0, 0.05, 0.45, 0.0, 2.0_f32.min(h - 0.2), door));
+}
+
+/// A metal frame under a glass pane.
+fn skylight(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let frame = material(rng, [0.55, 0.55, 0.57], Texture::Metal);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h * 0.5, frame));
+    let glass = material(rng, [0.35, 0.50, 0.62], Texture::Glass);
+    out.push(p.cuboid(0.0, 0.0, hx * 0.92, hy * 0.92, h * 0.5, h, glass));
+}
+
+/// A small building: walls below, a roof on top, classed as a building.
+fn small_building(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let (wl, wt) = WALL_LOOKS[rng.random_range(0..WALL_LOOKS.len())];
+    let wall = material(rng, wl, wt);
+    let (rl, rt) = ROOF_LOOKS[rng.random_range(0..ROOF_LOOKS.len())];
+    let roof = material(rng, rl, rt);
+    let mut body = p.cuboid(0.0, 0.0, hx, hy, 0.0, h, roof);
+    body.side_material = wall;
+    body.top_class = SemanticClass::BuildingRooftop as u8;
+    body.side_class = SemanticClass::BuildingWall as u8;
+    out.push(body);
+}
+
+/// A metal box with one or two fans on top.
+fn ac_unit(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let m = sheet_metal(rng);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
+    let fan = material(rng, [0.15, 0.15, 0.16], Texture::Plain);
+    let n = if hy > 0.9 { 2 } else { 1 };
+    for k in 0..n {
+        let ly = if n == 1 { 0.0 } else { (k as f32 - 0.5) * hy };
+        out.push(p.cylinder(0.0, ly, hx.min(hy / n as f32) * 0.75, h, h + 0.08, fan));
+    }
+}
+
+/// A round table between two benches with backs.
+fn seating(p: &Placer, [hx, hy, _]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let wood = material(rng, [0.50, 0.34, 0.20], Texture::Wood);
+    out.push(p.cylinder(0.0, 0.0, 0.06, 0.0, 0.72, wood));
+    out.push(p.cylinder(0.0, 0.0, 0.55, 0.72, 0.77, wood));
+    for side in [-1.0f32, 1.0] {
+        out.push(p.cuboid(0.0, side * (hy - 0.25), hx * 0.8, 0.22, 0.0, 0.45, wood));
+        out.push(p.cuboid(0.0, side * (hy - 0.05), hx * 0.8, 0.05, 0.45, 0.9, wood));
+    }
+}
+
+/// A duct raised on three metal feet.
+fn air_ducts(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let m = sheet_metal(rng);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.15, h, m));
+    for k in [-0.8f32, 0.0, 0.8] {
+        out.push(p.cuboid(k * hx, 0.0, 0.08, hy, 0.0, 0.15, m));
+    }
+}
+
+/// A wooden tank on four steel legs, with a conical roof.
+fn water_tower(p: &Placer, [hx, _, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let wood = material(rng, [0.45, 0.32, 0.22], Texture::Wood);
+    let steel = material(rng, [0.30, 0.28, 0.27], Texture::Metal);
+    let r = hx - 0.1;
+    let legs = h * rng.random_range(0.3..0.45);
+    let leg = 0.7 * r;
+    for (lx, ly) in [(leg, leg), (-leg, leg), (leg, -leg), (-leg, -leg)] {
+        out.push(p.cuboid(lx, ly, 0.12, 0.12, 0.0, legs, steel));
+    }
+    out.push(p.cuboid(0.0, 0.0, r * 0.95, r * 0.95, legs, legs + 0.15, steel));
+    let roof_h = (h - legs) * 0.2;
+    out.push(p.cylinder(0.0, 0.0, r, legs + 0.15, h - roof_h, wood));
+    out.push(p.cone(0.0, 0.0, r + 0.1, h - roof_h, h, steel));
+}
+
+/// A brick stack, or a metal flue with a cap.
+fn chimney(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    if rng.random_bool(0.6) {
+        let brick = material(rng, [0.55, 0.28, 0.2], Texture::Brick);
+        out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, brick));
+    } else {
+        let m = material(rng, [0.45, 0.45, 0.47], Texture::Metal);
+        out.push(p.cylinder(0.0, 0.0, hx * 0.8, 0.0, h, m));
+        out.push(p.cone(0.0, 0.0, hx, h, h + 0.3, m));
+    }
+}
+
+/// A clad tank on a plinth, with a conical roof.
+fn enclosed_water_tower(
+    p: &Placer,
+    [hx, hy, h]: [f32; 3],
+    rng: &mut SmallRng,
+    out: &mut Vec<Prim>,
+) {
+    let looks = [[0.70, 0.70, 0.68], [0.45, 0.32, 0.22], [0.40, 0.45, 0.42]];
+    let look = looks[rng.random_range(0..looks.len())];
+    let m = material(rng, look, Texture::Metal);
+    let base = material(rng, [0.5, 0.5, 0.5], Texture::Plain);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, 0.6, base));
+    out.push(p.cylinder(0.0, 0.0, hx * 0.98, 0.6, h - 0.6, m));
+    out.push(p.cone(0.0, 0.0, hx, h - 0.6, h, m));
+}
+
+/// A flat sheet in one of four colours.
+fn tarp(p: &Placer, [hx, hy, h]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let looks = [
+        [0.15, 0.30, 0.65],
+        [0.20, 0.45, 0.25],
+        [0.55, 0.55, 0.50],
+        [0.60, 0.40, 0.15],
+    ];
+    let look = looks[rng.random_range(0..looks.len())];
+    let m = material(rng, look, Texture::Plain);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, h, m));
+}
+
+/// A planter with three to seven leafy crowns.
+fn vegetation(p: &Placer, [hx, hy, _]: [f32; 3], rng: &mut SmallRng, out: &mut Vec<Prim>) {
+    let planter = material(rng, [0.45, 0.38, 0.30], Texture::Wood);
+    out.push(p.cuboid(0.0, 0.0, hx, hy, 0.0, 0.4, planter));
+    let leaves = material(rng, [0.20, 0.42, 0.15], Texture::Foliage);
+    let n = rng.random_range(3..8);
+    for _ in 0..n {
+        let r = rng.random_range(0.3f32..0.75).min(hx.min(hy));
+        let lx = rng.random_range(-(hx - r).max(0.0)..=(hx - r).max(0.0));
+        let ly = rng.random_range(-(hy - r).max(0.0)..=(hy - r).max(0.0));
+        out.push(p.sphere(lx, ly, 0.4 + r * 0.8, r, leaves));
     }
 }
 
