@@ -573,9 +573,14 @@ fn defaults_table() -> toml::Table {
 /// (a choice it does not know, a malformed size) is named by its key.
 fn deserialize(table: toml::Table) -> Result<Config, Error> {
     Config::deserialize(toml::Value::Table(table.clone())).map_err(|e| {
-        first_refused_key(&table)
-            .unwrap_or_else(|| Error::config("(config)", e.to_string().trim().to_owned()))
+        first_refused_key(&table).unwrap_or_else(|| Error::config("(config)", reason(&e)))
     })
+}
+
+/// A deserialisation error's own words, without the key path that [`Error::config`] names.
+fn reason(e: &toml::de::Error) -> String {
+    let text = e.to_string();
+    text.lines().next().unwrap_or_default().trim().to_owned()
 }
 
 /// The first key of `table` that the defaults with that one key set do not deserialise.
@@ -589,7 +594,7 @@ fn first_refused_key(table: &toml::Table) -> Option<Error> {
             }
             Config::deserialize(toml::Value::Table(probe))
                 .err()
-                .map(|e| Error::config(format!("{section}.{key}"), e.to_string().trim().to_owned()))
+                .map(|e| Error::config(format!("{section}.{key}"), reason(&e)))
         })
     })
 }
