@@ -1,6 +1,8 @@
 //! The server configuration: built-in defaults ← TOML file ← `LANDING__SECTION__KEY` environment
-//! variables ← command-line flags. Unknown keys are errors naming the key; [`Config::validate`]
-//! runs before anything binds.
+//! variables ← command-line flags. Unknown keys are errors naming the key, and so is a value a
+//! key refuses: choices are enums (`"cpu"`/`"cuda"`, `"pretty"`/`"json"`, …) and input sizes a
+//! list of `"WxH"`, parsed once, here. [`Config::validate`] checks the ranges section by section
+//! before anything binds.
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -26,7 +28,7 @@ pub struct Config {
 /// `[fusion]`: the defaults of streams that ask for approach fusion (`FusionOptions`); a stream
 /// may ask for other values, but never for more cells than `max_cells`. The keys are the
 /// `FusionOptions` field names; [`FusionConfig::params`] and `From<&FusionParams>` are the one
-/// place each meets the fusion crate's own field.
+/// place where each meets the fusion crate's own field (`convert` goes through them too).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FusionConfig {
