@@ -15,8 +15,8 @@ at fault.
       container's LANDING__* environment to DIR/<render>/ for `landing-server check-config`.
 
   validate.py config FILE...
-      Checks TOML files against the server config contract: known sections and keys only, value
-      types, enumerations. A stand-in for `landing-server check-config` that needs no build; the
+      Checks TOML files against the server config contract: every key listed, known sections and
+      keys only, value types, enumerations, input sizes. A stand-in for `landing-server check-config` that needs no build; the
       server's own check is authoritative and check.sh runs it too.
 
   validate.py health ADDR [--service NAME] [--timeout S] [--expect SERVING|NOT_SERVING]
@@ -86,14 +86,23 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "intra_threads": int,
         "sessions": int,
         "ort_library": str,
-        "input_sizes": str,
-        "stream_every_size": bool,
-        "min_confidence": (int, float),
+        "input_sizes": list,
         "ort_log_level": str,
     },
     "auth": {"tokens_file": str},
     "tls": {"cert_path": str, "key_path": str, "client_ca_path": str},
     "log": {"format": str, "filter": str},
+    "fusion": {
+        "cell_size_m": (int, float),
+        "horizon_s": (int, float),
+        "max_cells": int,
+        "keep_out_frames": int,
+        "keep_out_interval_s": (int, float),
+        "max_jump_m": (int, float),
+        "obstacle_weight": int,
+        "register_scans": bool,
+        "max_pixel_footprint_m": (int, float),
+    },
 }
 ENUMS = {
     ("segmentation", "execution_provider"): ("cpu", "cuda"),
@@ -101,6 +110,8 @@ ENUMS = {
     ("log", "format"): ("pretty", "json"),
 }
 ENV_PREFIX = "LANDING__"
+# An item of segmentation.input_sizes: "WIDTHxHEIGHT", each side in 32..=4096.
+INPUT_SIZE = re.compile(r"\s*(\d+)\s*[xX]\s*(\d+)\s*")
 
 # Where the images put things (deploy/Dockerfile, deploy/Dockerfile.gpu).
 IMAGE_MODEL = "/opt/landing/models/rooftop-segmentation.onnx"
@@ -117,6 +128,25 @@ class CheckError(Exception):
 
 # ---------------------------------------------------------------------------------------------
 # Config contract
+
+
+def check_input_sizes(sizes: list, where: str) -> list[str]:
+    """The problems of a segmentation.input_sizes list (at most 4 "WxH" items, sides 32..=4096)."""
+    problems = []
+    if len(sizes) > 4:
+        problems.append(f"{where}: segmentation.input_sizes has {len(sizes)} sizes; at most 4")
+    for item in sizes:
+        match = INPUT_SIZE.fullmatch(item) if isinstance(item, str) else None
+        if not match or not all(32 <= int(side) <= 4096 for side in match.groups()):
+            problems.append(f"{where}: segmentation.input_sizes item {item!r} is not WIDTHxHEIGHT in 32..=4096")
+    return problems
+
+
+def check_config_complete(table: dict, where: str) -> list[str]:
+    """The keys of the contract that a whole config file leaves out (a shipped file lists them all)."""
+    return [f"{where}: missing key {section}.{key}"
+            for section, keys in CONTRACT.items() for key in keys
+            if not isinstance(table.get(section), dict) or key not in table[section]]
 
 
 def check_config_table(table: dict, where: str) -> list[str]:
@@ -141,6 +171,8 @@ def check_config_table(table: dict, where: str) -> list[str]:
             allowed = ENUMS.get((section, key))
             if allowed and value not in allowed:
                 problems.append(f"{where}: {section}.{key} = {value!r} is not one of {allowed}")
+            if (section, key) == ("segmentation", "input_sizes"):
+                problems += check_input_sizes(value, where)
     return problems
 
 
@@ -148,7 +180,7 @@ def effective_config(toml_text: str, env: dict[str, str], where: str) -> dict:
     """The file's table with the LANDING__SECTION__KEY variables among `env` applied (as strings
     parsed like the server does for numbers and booleans)."""
     table = tomllib.loads(toml_text)
-    problems = check_config_table(table, where)
+    problems = check_config_table(table, where) + check_config_complete(table, where)
     for name, raw in sorted(env.items()):
         if not name.startswith(ENV_PREFIX):
             continue
@@ -161,6 +193,8 @@ def effective_config(toml_text: str, env: dict[str, str], where: str) -> dict:
         value: object = raw
         if want is bool:
             value = {"true": True, "false": False}.get(raw, raw)
+        elif want is list:
+            value = [item.strip() for item in raw.split(",") if item.strip()]
         elif want is int:
             value = int(raw) if re.fullmatch(r"-?\d+", raw) else raw
         elif want == (int, float):
@@ -582,6 +616,7 @@ def check_images() -> list[str]:
     problems: list[str] = []
     baked = tomllib.loads((DEPLOY / "config" / "server.toml").read_text())
     problems += check_config_table(baked, "deploy/config/server.toml")
+    problems += check_config_complete(baked, "deploy/config/server.toml")
     srv = baked.get("server", {})
     want_ports = {port_of(srv.get("listen", "0.0.0.0:50051"), "server.listen")}
     if srv.get("metrics_listen", "0.0.0.0:9464"):
@@ -695,6 +730,8 @@ def mutations() -> list[tuple[str, str, object]]:
         ("cpu", "terminationGracePeriodSeconds", lambda o: edit_toml(o, "shutdown_grace_s = 20.0", "shutdown_grace_s = 60.0")),
         ("cpu", "unknown key server.drain_s", lambda o: edit_toml(o, "[server]\n", "[server]\ndrain_s = 3\n")),
         ("cpu", "execution_provider", lambda o: edit_toml(o, 'execution_provider = "cpu"', 'execution_provider = "tpu"')),
+        ("cpu", "missing key fusion.obstacle_weight", lambda o: edit_toml(o, "obstacle_weight = 4", "# obstacle_weight = 4")),
+        ("cpu", "input_sizes item '320x8'", lambda o: edit_toml(o, '"256x192"]', '"320x8"]')),
         ("cpu", "ports[grpc]", lambda o: edit_toml(o, 'listen = "0.0.0.0:50051"', 'listen = "0.0.0.0:50052"')),
         ("cpu", "loopback", lambda o: edit_toml(o, 'metrics_listen = "0.0.0.0:9464"', 'metrics_listen = "127.0.0.1:9464"')),
         ("cpu", "model_path", lambda o: edit_toml(o, IMAGE_MODEL, "models/rooftop-segmentation.onnx")),
@@ -893,7 +930,8 @@ def main(argv: list[str]) -> int:
             problems = []
             for f in args.files:
                 try:
-                    problems += check_config_table(tomllib.loads(f.read_text()), str(f))
+                    table = tomllib.loads(f.read_text())
+                    problems += check_config_table(table, str(f)) + check_config_complete(table, str(f))
                 except tomllib.TOMLDecodeError as e:
                     problems.append(f"{f}: {e}")
             for p in problems:

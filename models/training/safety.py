@@ -1,11 +1,7 @@
 #!/usr/bin/env python3
 """The model card's safety table: per true class, the share of its pixels the shipped model calls
 landable (building rooftop), at each input size the service runs and under the service's
-two-size guard (a pixel is landable only where every size says so); with --confidence, also at
-the first size alone with a rooftop pixel landable only where the model's confidence is at least
-each threshold, as `segmentation.min_confidence` decides it (the `confidence` output of
-add_confidence.py, added in memory when the model lacks it; for thresholds of 0.5 and above it
-is the rooftop probability).
+two-size guard (a pixel is landable only where every size says so).
 
 A non-rooftop pixel called landable is what can become an unsafe landing site: an obstacle on
 the roof (classes 5-14), or the ground or a wall beside it (2, 3). Pixels labelled 0 (unknown)
@@ -18,8 +14,7 @@ Example:
   cargo run --release -p landing-sim -- dataset --seed 4242 --images 300 --split test \
       --out /tmp/safety-test --width 320 --height 240
   .venvs/train/bin/python models/training/safety.py --test /tmp/safety-test \
-      --model models/rooftop-segmentation.onnx --sizes 320x240,256x192 --json /tmp/safety.json \
-      --confidence 0.5,0.6,0.7,0.75,0.8,0.85,0.9
+      --model models/rooftop-segmentation.onnx --sizes 320x240,256x192 --json /tmp/safety.json
 """
 
 from __future__ import annotations
@@ -30,12 +25,10 @@ import sys
 from pathlib import Path
 
 import numpy as np
-import onnx
 import onnxruntime as ort
 from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from add_confidence import add_confidence  # noqa: E402
 from seg.data import load_split, to_input  # noqa: E402
 from seg.models import CLASS_NAMES, NUM_CLASSES  # noqa: E402
 
@@ -44,28 +37,22 @@ ROOFTOP = 4
 ROOF_OBSTACLES = range(5, NUM_CLASSES)
 
 
-def session_with_confidence(path: str) -> ort.InferenceSession:
-    """The model with its `confidence` output (added in memory when it lacks one)."""
-    model = onnx.load(path)
-    if not any(o.name == "confidence" for o in model.graph.output):
-        model = add_confidence(model)
+def session(path: str) -> ort.InferenceSession:
+    """The model on one CPU thread."""
     so = ort.SessionOptions()
     so.intra_op_num_threads = 1
-    return ort.InferenceSession(model.SerializeToString(), so, providers=["CPUExecutionProvider"])
+    return ort.InferenceSession(path, so, providers=["CPUExecutionProvider"])
 
 
-def predict(sess, image: np.ndarray, w: int, h: int) -> tuple[np.ndarray, np.ndarray]:
-    """The model's classes and confidence (uint8, 255 x probability) at input size (w, h),
-    resized back to the image's size (nearest)."""
+def predict(sess, image: np.ndarray, w: int, h: int) -> np.ndarray:
+    """The model's classes at input size (w, h), resized back to the image's size (nearest)."""
     height, width = image.shape[:2]
     resized = np.asarray(Image.fromarray(image).resize((w, h), Image.BILINEAR))
-    classes, confidence = sess.run(["classes", "confidence"],
-                                   {"image": to_input(resized[None].copy()).numpy()})
-    classes, confidence = classes[0], confidence[0]
+    (classes,) = sess.run(["classes"], {"image": to_input(resized[None].copy()).numpy()})
+    classes = classes[0]
     if (w, h) != (width, height):
         classes = np.asarray(Image.fromarray(classes).resize((width, height), Image.NEAREST))
-        confidence = np.asarray(Image.fromarray(confidence).resize((width, height), Image.NEAREST))
-    return classes, confidence
+    return classes
 
 
 def main() -> int:
@@ -73,17 +60,13 @@ def main() -> int:
     ap.add_argument("--test", required=True, help="dataset directory (landing-sim dataset)")
     ap.add_argument("--model", required=True)
     ap.add_argument("--sizes", default="320x240,256x192", help="input sizes, as the service's input_sizes")
-    ap.add_argument("--confidence", default="", help="confidence thresholds at the first size")
     ap.add_argument("--limit", type=int)
     ap.add_argument("--json")
     args = ap.parse_args()
     sizes = [tuple(int(v) for v in s.split("x")) for s in args.sizes.split(",")]
-    thresholds = [float(t) for t in args.confidence.split(",") if t]
-    sess = session_with_confidence(args.model)
+    sess = session(args.model)
     images, labels = load_split(args.test, limit=args.limit)
-    first = f"{sizes[0][0]}x{sizes[0][1]}"
-    columns = ([f"{w}x{h}" for w, h in sizes] + (["guard"] if len(sizes) > 1 else [])
-               + [f"{first} p≥{t:g}" for t in thresholds])
+    columns = [f"{w}x{h}" for w, h in sizes] + (["guard"] if len(sizes) > 1 else [])
     landable = {c: np.zeros(NUM_CLASSES, dtype=np.int64) for c in columns}
     truth = np.zeros(NUM_CLASSES, dtype=np.int64)
     for image, label in zip(images, labels):
@@ -91,19 +74,12 @@ def main() -> int:
         truth += np.bincount(label[keep], minlength=NUM_CLASSES)
         masks = []
         for (w, h), column in zip(sizes, columns):
-            classes, confidence = predict(sess, image, w, h)
-            roof = classes == ROOFTOP
-            if not masks:
-                first_roof, first_confidence = roof, confidence
+            roof = predict(sess, image, w, h) == ROOFTOP
             masks.append(roof)
             landable[column] += np.bincount(label[keep & roof], minlength=NUM_CLASSES)
         if len(sizes) > 1:
             guard = np.logical_and.reduce(masks)
             landable["guard"] += np.bincount(label[keep & guard], minlength=NUM_CLASSES)
-        for t in thresholds:
-            # As the service: min = round(255 t), a pixel below it is not landable.
-            sure = first_roof & (first_confidence >= round(255 * t))
-            landable[f"{first} p≥{t:g}"] += np.bincount(label[keep & sure], minlength=NUM_CLASSES)
 
     def share(column: str, classes) -> float | None:
         n = sum(int(truth[c]) for c in classes)

@@ -53,8 +53,8 @@ pub use image::RgbImage;
 pub use keep_out::ObstacleRays;
 pub use mask::{ClassMask, Confusion, IouReport, iou};
 pub use segmenter::{
-    CONFIDENCE_OUTPUT, DEFAULT_MODEL_PATH, ExecutionProvider, ModelInfo, OrtLogLevel, Segmentation,
-    Segmenter, SegmenterConfig, resolve_ort_library, workspace_root,
+    DEFAULT_MODEL_PATH, ExecutionProvider, ModelInfo, OrtLogLevel, Segmenter, SegmenterConfig,
+    resolve_ort_library, workspace_root,
 };
 
 /// Number of class ids a mask may hold, `Unknown` (0) included: the model's output channels.

@@ -71,33 +71,6 @@ impl ClassMask {
         self.data
     }
 
-    /// Makes unknown (0) every pixel whose class passes `demote` and whose `confidence` (one
-    /// byte a pixel in the mask's order, 255 × the top class's probability) is below `min`;
-    /// returns how many. The service demotes unconfident landable pixels: their points get no
-    /// class, so no landing polygon covers them.
-    pub fn demote_unconfident(
-        &mut self,
-        confidence: &[u8],
-        min: u8,
-        demote: impl Fn(u8) -> bool,
-    ) -> Result<usize, PerceptionError> {
-        if confidence.len() != self.data.len() {
-            return Err(PerceptionError::invalid_input(
-                "confidence",
-                format!("{} values", confidence.len()),
-                format!("the mask has {} pixels", self.data.len()),
-            ));
-        }
-        let mut demoted = 0;
-        for (class, &c) in self.data.iter_mut().zip(confidence) {
-            if c < min && demote(*class) {
-                *class = 0;
-                demoted += 1;
-            }
-        }
-        Ok(demoted)
-    }
-
     /// The class at pixel `(x, y)`, or `None` outside the mask.
     pub fn get(&self, x: u32, y: u32) -> Option<u8> {
         (x < self.width && y < self.height)
@@ -329,22 +302,6 @@ mod tests {
         assert_eq!(r.truth_pixels[4], 2);
         assert_eq!(r.mean_over_classes_with(2), Some(0.5));
         assert_eq!(r.mean_over_classes_with(3), None);
-    }
-
-    #[test]
-    fn demote_unconfident_clears_only_unsure_pixels_of_the_chosen_classes() {
-        // Rooftop (4) sure, rooftop unsure, vent (7) unsure, rooftop exactly at the threshold.
-        let mut m = ClassMask::new(4, 1, vec![4, 4, 7, 4]).unwrap();
-        let demoted = m
-            .demote_unconfident(&[250, 100, 100, 179], 179, |c| c == 4)
-            .unwrap();
-        assert_eq!(demoted, 1);
-        assert_eq!(
-            m.as_slice(),
-            &[4, 0, 7, 4],
-            "an unsure obstacle stays an obstacle"
-        );
-        assert!(m.demote_unconfident(&[0; 3], 1, |_| true).is_err());
     }
 
     #[test]

@@ -23,8 +23,9 @@ pub const DEFAULT_INPUT_SIZE: (u32, u32) = (256, 192);
 /// The environment variable naming the ONNX Runtime library; it wins over the default location.
 pub const ORT_DYLIB_ENV: &str = "ORT_DYLIB_PATH";
 
-/// Where ONNX Runtime runs the model.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Where ONNX Runtime runs the model; `"cpu"` or `"cuda"` in a config file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 #[non_exhaustive]
 pub enum ExecutionProvider {
     /// The CPU (always available).
@@ -48,22 +49,6 @@ impl ExecutionProvider {
 impl std::fmt::Display for ExecutionProvider {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.as_str())
-    }
-}
-
-impl std::str::FromStr for ExecutionProvider {
-    type Err = PerceptionError;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        match s.to_ascii_lowercase().as_str() {
-            "cpu" => Ok(Self::Cpu),
-            "cuda" | "gpu" => Ok(Self::Cuda),
-            _ => Err(PerceptionError::InvalidConfig {
-                field: "execution_provider",
-                value: format!("{s:?}"),
-                reason: "expected \"cpu\" or \"cuda\"",
-            }),
-        }
     }
 }
 
@@ -128,6 +113,21 @@ impl std::str::FromStr for OrtLogLevel {
                 value: format!("{s:?}"),
                 reason: "expected \"verbose\", \"info\", \"warning\", \"error\" or \"fatal\"",
             })
+    }
+}
+
+/// Written as [`OrtLogLevel::as_str`] says; read as [`str::parse`] does ("warn" and any case
+/// too), so a config file names a level as a log line would.
+impl serde::Serialize for OrtLogLevel {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_str(self.as_str())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for OrtLogLevel {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let name = <String as serde::Deserialize>::deserialize(deserializer)?;
+        name.parse().map_err(serde::de::Error::custom)
     }
 }
 
@@ -239,20 +239,6 @@ pub struct ModelInfo {
     pub intra_threads: usize,
     /// The ONNX Runtime library in use.
     pub ort_library: PathBuf,
-    /// The graph has a `confidence` output (uint8, 255 × the top class's probability).
-    pub confidence: bool,
-}
-
-/// The name of the optional confidence output (`models/MODEL_CARD.md`).
-pub const CONFIDENCE_OUTPUT: &str = "confidence";
-
-/// One image's segmentation: the class mask and, when the graph outputs it, the confidence in
-/// each pixel's class (one byte a pixel in the mask's order, 255 × the top class's softmax
-/// probability).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Segmentation {
-    pub mask: ClassMask,
-    pub confidence: Option<Vec<u8>>,
 }
 
 /// A loaded segmentation model. `Send + Sync`: share it in an `Arc`; calls to [`Segmenter::segment`]
@@ -262,8 +248,8 @@ pub struct Segmenter {
     info: ModelInfo,
 }
 
-/// The session and the options of a run for the class ids alone (ONNX Runtime then skips the
-/// confidence branch, about 3 ms at 320 × 240 on one thread).
+/// The session and the options of a run for the class ids alone (ONNX Runtime then skips any
+/// other output a graph may have).
 struct Loaded {
     session: Session,
     classes_only: RunOptions<HasSelectedOutputs>,
@@ -292,7 +278,7 @@ impl Segmenter {
             .collect::<String>();
 
         let (session, provider) = build_session(config, &env, &bytes)?;
-        let confidence = check_signature(&session, &config.model_path)?;
+        check_signature(&session, &config.model_path)?;
 
         let metadata = session.metadata().ok();
         let custom = |key: &str| metadata.as_ref().and_then(|m| m.custom(key));
@@ -321,7 +307,6 @@ impl Segmenter {
             execution_provider: provider,
             intra_threads: config.intra_threads,
             ort_library: library,
-            confidence,
         };
         tracing::info!(
             model = %info.name,
@@ -367,18 +352,6 @@ impl Segmenter {
         self.run(&preprocess(image, width, height), width, height)
     }
 
-    /// Like [`Segmenter::segment_at`], with the model's confidence in each pixel when the graph
-    /// outputs it (`info().confidence`).
-    pub fn segment_with_confidence_at(
-        &self,
-        image: &RgbImage,
-        width: u32,
-        height: u32,
-    ) -> Result<Segmentation, PerceptionError> {
-        check_not_empty(image)?;
-        self.infer(&preprocess(image, width, height), width, height, true)
-    }
-
     /// Runs the model on an already preprocessed NCHW float32 tensor of `3 * height * width`
     /// values (see [`crate::preprocess`]). Exposed for benchmarks that time the stages apart.
     pub fn run(
@@ -387,17 +360,6 @@ impl Segmenter {
         width: u32,
         height: u32,
     ) -> Result<ClassMask, PerceptionError> {
-        Ok(self.infer(input, width, height, false)?.mask)
-    }
-
-    /// Runs the graph for the class ids alone, or for every output (`with_confidence`).
-    fn infer(
-        &self,
-        input: &[f32],
-        width: u32,
-        height: u32,
-        with_confidence: bool,
-    ) -> Result<Segmentation, PerceptionError> {
         let expected = 3 * width as usize * height as usize;
         if input.len() != expected || width == 0 || height == 0 {
             return Err(PerceptionError::invalid_input(
@@ -418,12 +380,9 @@ impl Segmenter {
             session,
             classes_only,
         } = &mut *loaded;
-        let outputs = if with_confidence {
-            session.run(ort::inputs![tensor])
-        } else {
-            session.run_with_options(ort::inputs![tensor], classes_only)
-        }
-        .map_err(|e| PerceptionError::runtime("running the model", e))?;
+        let outputs = session
+            .run_with_options(ort::inputs![tensor], classes_only)
+            .map_err(|e| PerceptionError::runtime("running the model", e))?;
         let (shape, data) = outputs[0]
             .try_extract_tensor::<u8>()
             .map_err(|e| PerceptionError::runtime("reading the model output", e))?;
@@ -441,32 +400,10 @@ impl Segmenter {
             u32::try_from(out_w).unwrap_or(0),
             u32::try_from(out_h).unwrap_or(0),
         );
-        let mask = ClassMask::new(out_w, out_h, data.to_vec()).map_err(|e| {
-            PerceptionError::ModelShape {
-                path: self.info.path.clone(),
-                message: format!("output is not a class mask: {e}"),
-            }
-        })?;
-        let confidence = match outputs.get(CONFIDENCE_OUTPUT) {
-            None => None,
-            Some(value) => {
-                let (_, c) = value
-                    .try_extract_tensor::<u8>()
-                    .map_err(|e| PerceptionError::runtime("reading the confidence output", e))?;
-                if c.len() != mask.as_slice().len() {
-                    return Err(PerceptionError::ModelShape {
-                        path: self.info.path.clone(),
-                        message: format!(
-                            "confidence output has {} values, the class mask {}",
-                            c.len(),
-                            mask.as_slice().len()
-                        ),
-                    });
-                }
-                Some(c.to_vec())
-            }
-        };
-        Ok(Segmentation { mask, confidence })
+        ClassMask::new(out_w, out_h, data.to_vec()).map_err(|e| PerceptionError::ModelShape {
+            path: self.info.path.clone(),
+            message: format!("output is not a class mask: {e}"),
+        })
     }
 }
 
@@ -653,8 +590,8 @@ fn check_not_empty(image: &RgbImage) -> Result<(), PerceptionError> {
     Ok(())
 }
 
-/// Checks the model's inputs and outputs; says whether it has the confidence output.
-fn check_signature(session: &Session, path: &Path) -> Result<bool, PerceptionError> {
+/// Checks the model's input and its first output (the class ids).
+fn check_signature(session: &Session, path: &Path) -> Result<(), PerceptionError> {
     let bad = |message: String| PerceptionError::ModelShape {
         path: path.to_path_buf(),
         message,
@@ -693,14 +630,5 @@ fn check_signature(session: &Session, path: &Path) -> Result<bool, PerceptionErr
             outputs[0].name()
         )));
     }
-    let confidence = outputs.iter().find(|o| o.name() == CONFIDENCE_OUTPUT);
-    if let Some(c) = confidence
-        && c.dtype().tensor_type() != Some(TensorElementType::Uint8)
-    {
-        return Err(bad(format!(
-            "output `{CONFIDENCE_OUTPUT}` is {:?}, expected uint8 (255 × probability)",
-            c.dtype()
-        )));
-    }
-    Ok(confidence.is_some())
+    Ok(())
 }

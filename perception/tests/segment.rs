@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use landing_perception::{
     Confusion, ExecutionProvider, ImageData, OrtLogLevel, PerceptionError, Segmenter,
-    SegmenterConfig, decode_image, resolve_ort_library, workspace_root,
+    SegmenterConfig, decode_image, resolve_ort_library,
 };
 
 /// Mean IoU, over the classes with at least [`MIN_CLASS_PIXELS`] truth pixels, that the shipped
@@ -212,56 +212,5 @@ fn ort_log_levels_parse_by_name_and_a_bad_one_is_named() {
     assert!(
         err.contains("ort_log_level") && err.contains("loud"),
         "{err}"
-    );
-}
-
-/// `models/rooftop-segmentation-confidence.onnx` is the shipped model with the `confidence`
-/// output added (`models/training/add_confidence.py`): the same classes, and a confidence that
-/// is a probability (above 1/14 for the top class of 14) in the mask's layout.
-#[test]
-fn the_confidence_model_gives_the_same_classes_and_a_confidence_per_pixel() {
-    let shipped = common::segmenter();
-    assert!(!shipped.info().confidence);
-    let with = Segmenter::new(&SegmenterConfig {
-        model_path: workspace_root().join("models/rooftop-segmentation-confidence.onnx"),
-        ..SegmenterConfig::default()
-    })
-    .expect("the confidence model loads");
-    assert!(with.info().confidence);
-    let (_, png, truth) = common::test_frames().remove(0);
-    let image = decode_image(ImageData::Png(&png)).unwrap();
-    let plain = shipped
-        .segment_with_confidence_at(&image, 320, 240)
-        .unwrap();
-    assert_eq!(plain.confidence, None);
-    let s = with.segment_with_confidence_at(&image, 320, 240).unwrap();
-    assert_eq!(s.mask, plain.mask, "the classes are the shipped model's");
-    assert_eq!(with.segment_at(&image, 320, 240).unwrap(), plain.mask);
-    let confidence = s.confidence.expect("a confidence");
-    assert_eq!(confidence.len(), 320 * 240);
-    assert!(
-        confidence.iter().all(|&c| c >= 255 / 14),
-        "a top probability is ≥ 1/14"
-    );
-    // Confident where the model is right more than where it is wrong.
-    let truth = truth.resized_nearest(320, 240).unwrap();
-    let mean = |right: bool| {
-        let (sum, n) = s
-            .mask
-            .as_slice()
-            .iter()
-            .zip(truth.as_slice())
-            .zip(&confidence)
-            .filter(|((p, t), _)| **t != 0 && (p == t) == right)
-            .fold((0u64, 0u64), |(sum, n), (_, &c)| {
-                (sum + u64::from(c), n + 1)
-            });
-        sum as f64 / n.max(1) as f64
-    };
-    assert!(
-        mean(true) > mean(false) + 20.0,
-        "{} vs {}",
-        mean(true),
-        mean(false)
     );
 }

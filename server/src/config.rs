@@ -1,10 +1,13 @@
 //! The server configuration: built-in defaults ← TOML file ← `LANDING__SECTION__KEY` environment
-//! variables ← command-line flags. Unknown keys are errors naming the key; [`Config::validate`]
-//! runs before anything binds.
+//! variables ← command-line flags. Unknown keys are errors naming the key, and so is a value a
+//! key refuses: choices are enums (`"cpu"`/`"cuda"`, `"pretty"`/`"json"`, …) and input sizes a
+//! list of `"WxH"`, parsed once, here. [`Config::validate`] checks the ranges section by section
+//! before anything binds.
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 
+use landing_perception::{ExecutionProvider, OrtLogLevel};
 use serde::{Deserialize, Serialize};
 
 use crate::Error;
@@ -23,7 +26,9 @@ pub struct Config {
 }
 
 /// `[fusion]`: the defaults of streams that ask for approach fusion (`FusionOptions`); a stream
-/// may ask for other values, but never for more cells than `max_cells`.
+/// may ask for other values, but never for more cells than `max_cells`. The keys are the
+/// `FusionOptions` field names; [`FusionConfig::params`] and `From<&FusionParams>` are the one
+/// place where each meets the fusion crate's own field (`convert` goes through them too).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct FusionConfig {
@@ -50,7 +55,12 @@ pub struct FusionConfig {
 
 impl Default for FusionConfig {
     fn default() -> Self {
-        let p = landing_fusion::FusionParams::default();
+        Self::from(&landing_fusion::FusionParams::default())
+    }
+}
+
+impl From<&landing_fusion::FusionParams> for FusionConfig {
+    fn from(p: &landing_fusion::FusionParams) -> Self {
         Self {
             cell_size_m: p.cell_m,
             horizon_s: p.horizon_s,
@@ -79,6 +89,12 @@ impl FusionConfig {
             register: self.register_scans,
             max_footprint_m: self.max_pixel_footprint_m,
         }
+    }
+
+    fn validate(&self) -> Result<(), Error> {
+        self.params()
+            .validate()
+            .map_err(|e| Error::config(format!("fusion.{}", e.field()), e.to_string()))
     }
 }
 
@@ -138,7 +154,60 @@ impl Default for PipelineConfig {
     }
 }
 
+impl ServerConfig {
+    fn validate(&self) -> Result<(), Error> {
+        parse_addr("server.listen", &self.listen)?;
+        for (key, addr) in [
+            ("server.metrics_listen", &self.metrics_listen),
+            ("server.foxglove_listen", &self.foxglove_listen),
+        ] {
+            if !addr.is_empty() {
+                parse_addr(key, addr)?;
+            }
+        }
+        in_range(
+            "server.max_request_bytes",
+            self.max_request_bytes,
+            1024 * 1024..=1024 * 1024 * 1024,
+            "1 MiB..=1 GiB",
+        )?;
+        in_range(
+            "server.shutdown_grace_s",
+            self.shutdown_grace_s,
+            0.0..=3600.0,
+            "0..=3600 seconds",
+        )
+    }
+}
+
 impl PipelineConfig {
+    fn validate(&self) -> Result<(), Error> {
+        if self.geometry_workers > 1024 {
+            return Err(Error::config(
+                "pipeline.geometry_workers",
+                format!("{} is above 1024", self.geometry_workers),
+            ));
+        }
+        in_range(
+            "pipeline.queue_capacity",
+            self.queue_capacity,
+            1..=1_000_000,
+            "1..=1000000",
+        )?;
+        in_range(
+            "pipeline.max_queued_bytes",
+            self.max_queued_bytes,
+            1 << 20..=1 << 40,
+            "1 MiB..=1 TiB",
+        )?;
+        in_range(
+            "pipeline.stream_buffer",
+            self.stream_buffer,
+            1..=10_000,
+            "1..=10000",
+        )
+    }
+
     /// The number of geometry workers, with 0 resolved to the core count.
     pub fn workers(&self) -> usize {
         match self.geometry_workers {
@@ -155,85 +224,65 @@ pub struct SegmentationConfig {
     pub enabled: bool,
     pub model_path: PathBuf,
     /// "cpu" or "cuda" (falls back to CPU with a warning).
-    pub execution_provider: String,
+    pub execution_provider: ExecutionProvider,
     pub intra_threads: u32,
     /// Parallel ONNX Runtime sessions.
     pub sessions: u32,
     /// "" = `ORT_DYLIB_PATH`, else `.ort/libonnxruntime.so`.
     pub ort_library: PathBuf,
-    /// Sizes the image is segmented at, `"WxH,WxH,…"`; a pixel is landable only where every
-    /// size says so (`landing_perception::ClassMask::fuse_keeping_obstacles`). "" = once, at the
-    /// size in the model's metadata. The default runs the shipped model (trained at 256 × 192) at
-    /// the camera's 320 × 240, where it sees small obstacles best, and at its own size, where it
-    /// sees rooftop-entrance tops best (EVALUATION.md). A fused stream's frames run the first
-    /// size alone unless `stream_every_size` is set (`segmentation::Judged`).
-    pub input_sizes: String,
-    /// Whether a fused stream's frames are segmented at every input size too, their keep-out
-    /// footprints keeping every size's obstacles. Off by default: in a stream the first
-    /// (finest) size alone classes the points and casts the footprints, for one inference a
-    /// frame instead of one a size. The guard there is the stream's: every frame that saw a
-    /// cell votes on its class, and the kept frames' footprints are cast together. Measured on
-    /// eight stream sets: no unsafe site either way, larger circles with one size
-    /// (EVALUATION.md, "One input size in streams").
-    pub stream_every_size: bool,
-    /// A pixel the model calls landable stays landable only when the model's confidence in it
-    /// (its `confidence` output: the top class's probability) is at least this; 0 = off. Needs
-    /// a model with the output: `models/rooftop-segmentation-confidence.onnx`, not the default
-    /// model (`models/MODEL_CARD.md`, "Safety"). Off by default: one size with a threshold was
-    /// not as safe as the two-size guard (EVALUATION.md).
-    pub min_confidence: f64,
+    /// Sizes the image is segmented at, `["WxH", …]` (in the environment `"WxH,WxH"`); a pixel
+    /// is landable only where every size says so
+    /// (`landing_perception::ClassMask::fuse_keeping_obstacles`). `[]` = once, at the size in the model's metadata. The default runs the shipped model
+    /// (trained at 256 × 192) at the camera's 320 × 240, where it sees small obstacles best, and
+    /// at its own size, where it sees rooftop-entrance tops best (EVALUATION.md). A fused
+    /// stream's frames run the finest size alone (`segmentation::Judged`).
+    pub input_sizes: Vec<InputSize>,
     /// The least severe of ONNX Runtime's own log messages that is logged: "verbose", "info",
     /// "warning", "error" or "fatal". ONNX Runtime writes about 200 INFO lines while it loads
     /// the model; `log.filter` still applies to what passes (its target is `ort`).
-    pub ort_log_level: String,
+    pub ort_log_level: OrtLogLevel,
 }
 
 impl SegmentationConfig {
-    /// `ort_log_level` parsed.
-    pub fn parsed_ort_log_level(&self) -> Result<landing_perception::OrtLogLevel, Error> {
-        self.ort_log_level.parse().map_err(|_| {
-            Error::config(
-                "segmentation.ort_log_level",
-                format!(
-                    "{:?} is not one of \"verbose\", \"info\", \"warning\", \"error\", \"fatal\"",
-                    self.ort_log_level
-                ),
-            )
-        })
+    /// Most input sizes a frame is segmented at.
+    pub const MAX_INPUT_SIZES: usize = 4;
+
+    /// `input_sizes`, finest (most pixels) first; empty for the model's own size.
+    pub fn input_sizes_finest_first(&self) -> Vec<(u32, u32)> {
+        let mut sizes: Vec<(u32, u32)> = self
+            .input_sizes
+            .iter()
+            .map(|s| (s.width, s.height))
+            .collect();
+        sizes.sort_by_key(|&(w, h)| std::cmp::Reverse(u64::from(w) * u64::from(h)));
+        sizes
     }
 
-    /// `input_sizes` parsed, finest first; empty for the model's own size.
-    pub fn parsed_input_sizes(&self) -> Result<Vec<(u32, u32)>, Error> {
-        const KEY: &str = "segmentation.input_sizes";
-        let mut sizes = Vec::new();
-        for entry in self
-            .input_sizes
-            .split(',')
-            .map(str::trim)
-            .filter(|e| !e.is_empty())
-        {
-            let size = entry
-                .split_once(['x', 'X'])
-                .and_then(|(w, h)| {
-                    Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?))
-                })
-                .ok_or_else(|| Error::config(KEY, format!("{entry:?} is not WIDTHxHEIGHT")))?;
-            if !(32..=4096).contains(&size.0) || !(32..=4096).contains(&size.1) {
-                return Err(Error::config(
-                    KEY,
-                    format!("{entry}: width and height must be in 32..=4096"),
-                ));
-            }
-            sizes.push(size);
-        }
-        if sizes.len() > 4 {
+    fn validate(&self) -> Result<(), Error> {
+        in_range(
+            "segmentation.intra_threads",
+            self.intra_threads,
+            1..=256,
+            "1..=256",
+        )?;
+        in_range("segmentation.sessions", self.sessions, 1..=64, "1..=64")?;
+        if self.input_sizes.len() > Self::MAX_INPUT_SIZES {
             return Err(Error::config(
-                KEY,
-                format!("{} sizes; at most 4", sizes.len()),
+                "segmentation.input_sizes",
+                format!(
+                    "{} sizes; at most {}",
+                    self.input_sizes.len(),
+                    Self::MAX_INPUT_SIZES
+                ),
             ));
         }
-        sizes.sort_by_key(|&(w, h)| std::cmp::Reverse(u64::from(w) * u64::from(h)));
-        Ok(sizes)
+        if self.enabled {
+            require_file("segmentation.model_path", &self.model_path)?;
+            if set(&self.ort_library) {
+                require_file("segmentation.ort_library", &self.ort_library)?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -242,15 +291,51 @@ impl Default for SegmentationConfig {
         Self {
             enabled: true,
             model_path: "models/rooftop-segmentation.onnx".into(),
-            execution_provider: "cpu".into(),
+            execution_provider: ExecutionProvider::Cpu,
             intra_threads: 1,
             sessions: 1,
             ort_library: PathBuf::new(),
-            input_sizes: "320x240,256x192".into(),
-            stream_every_size: false,
-            min_confidence: 0.0,
-            ort_log_level: landing_perception::OrtLogLevel::default().to_string(),
+            input_sizes: vec![InputSize::new(320, 240), InputSize::new(256, 192)],
+            ort_log_level: OrtLogLevel::default(),
         }
+    }
+}
+
+/// One size the model is run at, `"WIDTHxHEIGHT"` in a config file; each side in 32..=4096.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
+pub struct InputSize {
+    pub width: u32,
+    pub height: u32,
+}
+
+impl InputSize {
+    /// Sides accepted, pixels.
+    pub const SIDES: std::ops::RangeInclusive<u32> = 32..=4096;
+
+    fn new(width: u32, height: u32) -> Self {
+        Self { width, height }
+    }
+}
+
+impl TryFrom<String> for InputSize {
+    type Error = String;
+
+    fn try_from(text: String) -> Result<Self, String> {
+        let (width, height) = text
+            .split_once(['x', 'X'])
+            .and_then(|(w, h)| Some((w.trim().parse().ok()?, h.trim().parse().ok()?)))
+            .ok_or_else(|| format!("{text:?} is not WIDTHxHEIGHT"))?;
+        if !Self::SIDES.contains(&width) || !Self::SIDES.contains(&height) {
+            return Err(format!("{text}: width and height must be in 32..=4096"));
+        }
+        Ok(Self::new(width, height))
+    }
+}
+
+impl From<InputSize> for String {
+    fn from(size: InputSize) -> String {
+        format!("{}x{}", size.width, size.height)
     }
 }
 
@@ -260,6 +345,15 @@ impl Default for SegmentationConfig {
 pub struct AuthConfig {
     /// One bearer token per line; "" = no auth. Health is exempt.
     pub tokens_file: PathBuf,
+}
+
+impl AuthConfig {
+    fn validate(&self) -> Result<(), Error> {
+        if set(&self.tokens_file) && read_tokens(&self.tokens_file)?.is_empty() {
+            return Err(Error::config("auth.tokens_file", "the file holds no token"));
+        }
+        Ok(())
+    }
 }
 
 /// `[tls]`: server certificate and optional client CA.
@@ -273,12 +367,44 @@ pub struct TlsConfig {
     pub client_ca_path: PathBuf,
 }
 
+impl TlsConfig {
+    fn validate(&self) -> Result<(), Error> {
+        let (cert, key) = (set(&self.cert_path), set(&self.key_path));
+        if cert != key {
+            let missing = if cert {
+                "tls.key_path"
+            } else {
+                "tls.cert_path"
+            };
+            return Err(Error::config(
+                missing,
+                "tls.cert_path and tls.key_path must be set together",
+            ));
+        }
+        if set(&self.client_ca_path) && !cert {
+            return Err(Error::config(
+                "tls.client_ca_path",
+                "client certificates need tls.cert_path and tls.key_path",
+            ));
+        }
+        for (key, path) in [
+            ("tls.cert_path", &self.cert_path),
+            ("tls.key_path", &self.key_path),
+            ("tls.client_ca_path", &self.client_ca_path),
+        ] {
+            if set(path) {
+                require_file(key, path)?;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// `[log]`: tracing output.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct LogConfig {
-    /// "pretty" or "json".
-    pub format: String,
+    pub format: LogFormat,
     /// EnvFilter syntax; `RUST_LOG` overrides.
     pub filter: String,
 }
@@ -286,10 +412,26 @@ pub struct LogConfig {
 impl Default for LogConfig {
     fn default() -> Self {
         Self {
-            format: "pretty".into(),
+            format: LogFormat::Pretty,
             filter: "info".into(),
         }
     }
+}
+
+impl LogConfig {
+    fn validate(&self) -> Result<(), Error> {
+        tracing_subscriber::EnvFilter::try_new(&self.filter)
+            .map(drop)
+            .map_err(|e| Error::config("log.filter", format!("{:?}: {e}", self.filter)))
+    }
+}
+
+/// How log lines are written: `"pretty"` (for people) or `"json"` (for collectors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    Pretty,
+    Json,
 }
 
 /// Prefix of the environment variables that override config keys.
@@ -324,139 +466,20 @@ impl Config {
         for (name, value) in env {
             apply_env(&mut table, &name, &value)?;
         }
-        let config = Config::deserialize(toml::Value::Table(table))
-            .map_err(|e| Error::config("(config)", e.to_string()))?;
+        let config = deserialize(table)?;
         config.validate()?;
         Ok(config)
     }
 
-    /// Checks every key; the error names the first bad one.
+    /// Checks every key, section by section; the error names the first bad one.
     pub fn validate(&self) -> Result<(), Error> {
-        let s = &self.server;
-        parse_addr("server.listen", &s.listen)?;
-        if !s.metrics_listen.is_empty() {
-            parse_addr("server.metrics_listen", &s.metrics_listen)?;
-        }
-        self.foxglove_addr()?;
-        if !(1024 * 1024..=1024 * 1024 * 1024).contains(&s.max_request_bytes) {
-            return Err(Error::config(
-                "server.max_request_bytes",
-                format!("{} is outside 1 MiB..=1 GiB", s.max_request_bytes),
-            ));
-        }
-        if !(s.shutdown_grace_s.is_finite() && (0.0..=3600.0).contains(&s.shutdown_grace_s)) {
-            return Err(Error::config(
-                "server.shutdown_grace_s",
-                format!("{} is outside 0..=3600 seconds", s.shutdown_grace_s),
-            ));
-        }
-        let p = &self.pipeline;
-        if p.geometry_workers > 1024 {
-            return Err(Error::config(
-                "pipeline.geometry_workers",
-                format!("{} is above 1024", p.geometry_workers),
-            ));
-        }
-        if !(1..=1_000_000).contains(&p.queue_capacity) {
-            return Err(Error::config(
-                "pipeline.queue_capacity",
-                format!("{} is outside 1..=1000000", p.queue_capacity),
-            ));
-        }
-        if !(1 << 20..=1 << 40).contains(&p.max_queued_bytes) {
-            return Err(Error::config(
-                "pipeline.max_queued_bytes",
-                format!("{} is outside 1 MiB..=1 TiB", p.max_queued_bytes),
-            ));
-        }
-        if !(1..=10_000).contains(&p.stream_buffer) {
-            return Err(Error::config(
-                "pipeline.stream_buffer",
-                format!("{} is outside 1..=10000", p.stream_buffer),
-            ));
-        }
-        let g = &self.segmentation;
-        if !matches!(g.execution_provider.as_str(), "cpu" | "cuda") {
-            return Err(Error::config(
-                "segmentation.execution_provider",
-                format!("{:?} is neither \"cpu\" nor \"cuda\"", g.execution_provider),
-            ));
-        }
-        if !(1..=256).contains(&g.intra_threads) {
-            return Err(Error::config(
-                "segmentation.intra_threads",
-                format!("{} is outside 1..=256", g.intra_threads),
-            ));
-        }
-        if !(1..=64).contains(&g.sessions) {
-            return Err(Error::config(
-                "segmentation.sessions",
-                format!("{} is outside 1..=64", g.sessions),
-            ));
-        }
-        g.parsed_input_sizes()?;
-        g.parsed_ort_log_level()?;
-        if !(0.0..=1.0).contains(&g.min_confidence) {
-            return Err(Error::config(
-                "segmentation.min_confidence",
-                format!("{} is outside 0..=1", g.min_confidence),
-            ));
-        }
-        if g.enabled {
-            require_file("segmentation.model_path", &g.model_path)?;
-            if !g.ort_library.as_os_str().is_empty() {
-                require_file("segmentation.ort_library", &g.ort_library)?;
-            }
-        }
-        if !self.auth.tokens_file.as_os_str().is_empty() {
-            let tokens = read_tokens(&self.auth.tokens_file)?;
-            if tokens.is_empty() {
-                return Err(Error::config("auth.tokens_file", "the file holds no token"));
-            }
-        }
-        let t = &self.tls;
-        let (cert, key, ca) = (set(&t.cert_path), set(&t.key_path), set(&t.client_ca_path));
-        if cert != key {
-            let missing = if cert {
-                "tls.key_path"
-            } else {
-                "tls.cert_path"
-            };
-            return Err(Error::config(
-                missing,
-                "tls.cert_path and tls.key_path must be set together",
-            ));
-        }
-        if ca && !cert {
-            return Err(Error::config(
-                "tls.client_ca_path",
-                "client certificates need tls.cert_path and tls.key_path",
-            ));
-        }
-        for (key, path) in [
-            ("tls.cert_path", &t.cert_path),
-            ("tls.key_path", &t.key_path),
-            ("tls.client_ca_path", &t.client_ca_path),
-        ] {
-            if set(path) {
-                require_file(key, path)?;
-            }
-        }
-        if let Err(e) = self.fusion.params().validate() {
-            return Err(Error::config(
-                format!("fusion.{}", e.field()),
-                e.to_string(),
-            ));
-        }
-        if !matches!(self.log.format.as_str(), "pretty" | "json") {
-            return Err(Error::config(
-                "log.format",
-                format!("{:?} is neither \"pretty\" nor \"json\"", self.log.format),
-            ));
-        }
-        tracing_subscriber::EnvFilter::try_new(&self.log.filter)
-            .map_err(|e| Error::config("log.filter", format!("{:?}: {e}", self.log.filter)))?;
-        Ok(())
+        self.server.validate()?;
+        self.pipeline.validate()?;
+        self.segmentation.validate()?;
+        self.auth.validate()?;
+        self.tls.validate()?;
+        self.fusion.validate()?;
+        self.log.validate()
     }
 
     /// The gRPC listen address (valid after [`Config::validate`]).
@@ -502,6 +525,20 @@ pub fn read_tokens(path: &Path) -> Result<Vec<String>, Error> {
         .collect())
 }
 
+/// `Ok` when `value` lies in `range`, else an error naming `key` and the range as `shown`.
+fn in_range<T: PartialOrd + std::fmt::Display>(
+    key: &str,
+    value: T,
+    range: std::ops::RangeInclusive<T>,
+    shown: &str,
+) -> Result<(), Error> {
+    if range.contains(&value) {
+        Ok(())
+    } else {
+        Err(Error::config(key, format!("{value} is outside {shown}")))
+    }
+}
+
 fn set(path: &Path) -> bool {
     !path.as_os_str().is_empty()
 }
@@ -534,6 +571,36 @@ fn defaults_table() -> toml::Table {
     }
 }
 
+/// The merged table as a [`Config`]. A value of the right TOML type that its key still refuses
+/// (a choice it does not know, a malformed size) is named by its key.
+fn deserialize(table: toml::Table) -> Result<Config, Error> {
+    Config::deserialize(toml::Value::Table(table.clone())).map_err(|e| {
+        first_refused_key(&table).unwrap_or_else(|| Error::config("(config)", reason(&e)))
+    })
+}
+
+/// A deserialisation error's own words, without the key path that [`Error::config`] names.
+fn reason(e: &toml::de::Error) -> String {
+    let text = e.to_string();
+    text.lines().next().unwrap_or_default().trim().to_owned()
+}
+
+/// The first key of `table` that the defaults with that one key set do not deserialise.
+fn first_refused_key(table: &toml::Table) -> Option<Error> {
+    let defaults = defaults_table();
+    table.iter().find_map(|(section, values)| {
+        values.as_table()?.iter().find_map(|(key, value)| {
+            let mut probe = defaults.clone();
+            if let Some(toml::Value::Table(target)) = probe.get_mut(section) {
+                target.insert(key.clone(), value.clone());
+            }
+            Config::deserialize(toml::Value::Table(probe))
+                .err()
+                .map(|e| Error::config(format!("{section}.{key}"), reason(&e)))
+        })
+    })
+}
+
 /// Merges a parsed file into the defaults, rejecting unknown sections/keys and wrong types.
 fn merge_file(table: &mut toml::Table, file: toml::Table) -> Result<(), Error> {
     for (section, value) in file {
@@ -555,7 +622,8 @@ fn merge_file(table: &mut toml::Table, file: toml::Table) -> Result<(), Error> {
     Ok(())
 }
 
-/// Applies `LANDING__SECTION__KEY=value`, parsing the value as the key's type.
+/// Applies `LANDING__SECTION__KEY=value`, parsing the value as the key's type (a list as its
+/// items between commas).
 fn apply_env(table: &mut toml::Table, name: &str, raw: &str) -> Result<(), Error> {
     let rest = &name[ENV_PREFIX.len()..];
     let parts: Vec<String> = rest.split("__").map(str::to_ascii_lowercase).collect();
@@ -588,6 +656,13 @@ fn apply_env(table: &mut toml::Table, name: &str, raw: &str) -> Result<(), Error
                     ));
                 }
             }),
+            toml::Value::Array(_) => toml::Value::Array(
+                raw.split(',')
+                    .map(str::trim)
+                    .filter(|item| !item.is_empty())
+                    .map(|item| toml::Value::String(item.to_owned()))
+                    .collect(),
+            ),
             _ => return Err(Error::config(&path, "cannot be set from the environment")),
         };
     target.insert(key.clone(), value);
@@ -599,7 +674,8 @@ fn coerce(path: &str, default: &toml::Value, value: toml::Value) -> Result<toml:
     match (default, value) {
         (V::String(_), v @ V::String(_))
         | (V::Boolean(_), v @ V::Boolean(_))
-        | (V::Float(_), v @ V::Float(_)) => Ok(v),
+        | (V::Float(_), v @ V::Float(_))
+        | (V::Array(_), v @ V::Array(_)) => Ok(v),
         (V::Integer(_), V::Integer(i)) => {
             if i < 0 {
                 Err(Error::config(path, format!("{i} is negative")))
@@ -656,13 +732,14 @@ mod tests {
             PathBuf::from("models/rooftop-segmentation.onnx")
         );
         assert_eq!(
-            (c.log.format.as_str(), c.log.filter.as_str()),
-            ("pretty", "info")
+            (c.log.format, c.log.filter.as_str()),
+            (LogFormat::Pretty, "info")
         );
-        assert_eq!(c.segmentation.ort_log_level, "warning");
+        assert_eq!(c.segmentation.ort_log_level, OrtLogLevel::Warning);
+        assert_eq!(c.segmentation.execution_provider, ExecutionProvider::Cpu);
         assert_eq!(
-            c.segmentation.parsed_ort_log_level().unwrap(),
-            landing_perception::OrtLogLevel::Warning
+            c.segmentation.input_sizes_finest_first(),
+            vec![(320, 240), (256, 192)]
         );
     }
 
@@ -689,10 +766,7 @@ mod tests {
             ("UNRELATED".to_owned(), "x".to_owned()),
         ];
         let c = Config::load(Some(&path), env).unwrap();
-        assert_eq!(
-            c.segmentation.parsed_ort_log_level().unwrap(),
-            landing_perception::OrtLogLevel::Error
-        );
+        assert_eq!(c.segmentation.ort_log_level, OrtLogLevel::Error);
         assert_eq!(c.server.listen, "127.0.0.1:7000");
         assert_eq!(c.server.shutdown_grace_s, 3.0);
         assert_eq!(c.pipeline.queue_capacity, 8);
@@ -762,15 +836,20 @@ mod tests {
                 "segmentation.model_path",
             ),
             (
-                "[segmentation]\ninput_sizes = \"320x8\"\n",
+                "[segmentation]\ninput_sizes = [\"320x8\"]\n",
                 "segmentation.input_sizes",
             ),
             (
-                "[segmentation]\nmin_confidence = 1.5\n",
-                "segmentation.min_confidence",
+                "[segmentation]\ninput_sizes = [\"320\"]\n",
+                "segmentation.input_sizes",
             ),
             (
-                "[segmentation]\ninput_sizes = \"320\"\n",
+                "[segmentation]\ninput_sizes = \"320x240\"\n",
+                "segmentation.input_sizes",
+            ),
+            (
+                "[segmentation]\ninput_sizes = [\"64x64\", \"96x96\", \"128x128\", \"160x160\", \
+                 \"192x192\"]\n",
                 "segmentation.input_sizes",
             ),
             (
@@ -786,6 +865,11 @@ mod tests {
                 "tls.key_path",
             ),
             ("[log]\nformat = \"xml\"\n", "log.format"),
+            ("[fusion]\ncell_size_m = 0.0\n", "fusion.cell_size_m"),
+            (
+                "[fusion]\nmax_pixel_footprint_m = -1.0\n",
+                "fusion.max_pixel_footprint_m",
+            ),
             ("[log]\nfilter = \"[[[\"\n", "log.filter"),
         ];
         for (i, (text, key)) in cases.into_iter().enumerate() {
@@ -822,5 +906,111 @@ mod tests {
         c.auth.tokens_file = tokens;
         let path = write("round.toml", &c.to_toml());
         assert_eq!(Config::load(Some(&path), vec![]).unwrap(), c);
+    }
+
+    #[test]
+    fn choices_are_refused_by_name_with_what_is_allowed() {
+        let path = write(
+            "provider.toml",
+            "[segmentation]\nexecution_provider = \"tpu\"\n",
+        );
+        let e = Config::load(Some(&path), no_model())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("segmentation.execution_provider")
+                && e.contains("tpu")
+                && e.contains("cuda"),
+            "{e}"
+        );
+        let env = vec![("LANDING__LOG__FORMAT".to_owned(), "xml".to_owned())];
+        let e = Config::load(None, [no_model(), env].concat())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("log.format") && e.contains("xml") && e.contains("json"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn input_sizes_are_a_list_in_a_file_and_commas_in_the_environment() {
+        let path = write(
+            "sizes.toml",
+            "[segmentation]\nenabled = false\ninput_sizes = [\"256x192\", \"320 x 240\"]\n",
+        );
+        let c = Config::load(Some(&path), vec![]).unwrap();
+        assert_eq!(
+            c.segmentation.input_sizes_finest_first(),
+            vec![(320, 240), (256, 192)]
+        );
+        let env = vec![(
+            "LANDING__SEGMENTATION__INPUT_SIZES".to_owned(),
+            "256x192, 320X240".to_owned(),
+        )];
+        let c = Config::load(None, [no_model(), env].concat()).unwrap();
+        assert_eq!(
+            c.segmentation.input_sizes_finest_first(),
+            vec![(320, 240), (256, 192)]
+        );
+        let env = vec![(
+            "LANDING__SEGMENTATION__INPUT_SIZES".to_owned(),
+            String::new(),
+        )];
+        let c = Config::load(None, [no_model(), env].concat()).unwrap();
+        assert!(
+            c.segmentation.input_sizes.is_empty(),
+            "\"\" is the model's own size"
+        );
+        let env = vec![(
+            "LANDING__SEGMENTATION__INPUT_SIZES".to_owned(),
+            "320x240,tiny".to_owned(),
+        )];
+        let e = Config::load(None, [no_model(), env].concat())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("segmentation.input_sizes") && e.contains("tiny"),
+            "{e}"
+        );
+    }
+
+    /// The shipped config files set every key the server has, each to its default but for the
+    /// deployment's own choices, and load as they are (the model path aside).
+    #[test]
+    fn shipped_config_files_list_every_key() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let keys = |table: &toml::Table| -> Vec<String> {
+            table
+                .iter()
+                .flat_map(|(section, values)| {
+                    let values = values.as_table().expect("a [section]");
+                    values.keys().map(move |key| format!("{section}.{key}"))
+                })
+                .collect()
+        };
+        let mut every = keys(&defaults_table());
+        every.sort();
+        for file in ["deploy/config/server.toml", "deploy/k8s/base/server.toml"] {
+            let path = root.join(file);
+            let text = std::fs::read_to_string(&path).unwrap();
+            let mut listed = keys(&text.parse().unwrap());
+            listed.sort();
+            assert_eq!(listed, every, "{file} lists every key, once");
+            let model = root.join("models/rooftop-segmentation.onnx");
+            let env = vec![
+                (
+                    "LANDING__SEGMENTATION__MODEL_PATH".to_owned(),
+                    model.display().to_string(),
+                ),
+                ("LANDING__AUTH__TOKENS_FILE".to_owned(), String::new()),
+            ];
+            let c = Config::load(Some(&path), env).unwrap_or_else(|e| panic!("{file}: {e}"));
+            assert_eq!(c.fusion, FusionConfig::default(), "{file}");
+            assert_eq!(
+                c.segmentation.input_sizes,
+                Config::default().segmentation.input_sizes
+            );
+        }
     }
 }

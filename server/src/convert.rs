@@ -8,6 +8,7 @@ use landing_geometry::Params;
 use landing_proto::v1;
 use nalgebra::Isometry3;
 
+use crate::config::FusionConfig;
 use crate::geodetic::Geodetic;
 use crate::pipeline::{
     CameraImage, Cloud, Frame, FrameOptions, FrameOutput, ImagePixels, Intrinsics,
@@ -239,6 +240,23 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
         None => Some(Isometry3::identity()),
         Some(p) => pose_of(c, "point_cloud.pose", p),
     };
+    let layout = cloud_layout(c, pc);
+    if c.violations.len() > before {
+        return None;
+    }
+    read_points(c, &pc.data, &layout?, pose?)
+}
+
+/// Where a packed point keeps its coordinates and its class.
+struct CloudLayout {
+    stride: usize,
+    xyz: [Coord; 3],
+    class_offset: Option<usize>,
+}
+
+/// Checks `point_cloud.point_stride`, `.fields` and the length of `.data`; `None` (with the
+/// violations recorded) unless x, y and z can be read.
+fn cloud_layout(c: &mut Checker, pc: &v1::PointCloud) -> Option<CloudLayout> {
     let stride = pc.point_stride as usize;
     if stride == 0 {
         c.bad("point_cloud.point_stride", "must be > 0");
@@ -255,46 +273,13 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
             );
             continue;
         }
-        let Ok(ty) = v1::NumericType::try_from(field.r#type) else {
-            c.bad(
-                format!("{path}.type"),
-                format!("{} is not a NumericType", field.r#type),
-            );
+        let Some((ty, offset)) = packed_field(c, &path, field, stride) else {
             continue;
         };
-        let Some(size) = numeric_size(ty) else {
-            c.bad(
-                format!("{path}.type"),
-                "must be set (NUMERIC_TYPE_UNSPECIFIED)",
-            );
-            continue;
-        };
-        let offset = field.offset as usize;
-        if stride > 0 && offset + size > stride {
-            c.bad(
-                format!("{path}.offset"),
-                format!("field {:?} at offset {offset} with {size} bytes overruns point_stride {stride}", field.name),
-            );
-            continue;
-        }
         match field.name.as_str() {
             "x" | "y" | "z" => {
                 let axis = usize::from(field.name.as_bytes()[0] - b'x');
-                xyz[axis] = match ty {
-                    v1::NumericType::Float32 => Some(Coord::F32(offset)),
-                    v1::NumericType::Float64 => Some(Coord::F64(offset)),
-                    other => {
-                        c.bad(
-                            format!("{path}.type"),
-                            format!(
-                                "{:?} must be FLOAT32 or FLOAT64, not {}",
-                                field.name,
-                                other.as_str_name()
-                            ),
-                        );
-                        None
-                    }
-                };
+                xyz[axis] = coordinate(c, &path, &field.name, ty, offset);
             }
             "class" => {
                 if ty == v1::NumericType::Uint8 {
@@ -330,16 +315,89 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
             ),
         );
     }
-    if c.violations.len() > before {
-        return None;
-    }
     let [Some(x), Some(y), Some(z)] = xyz else {
         return None;
     };
-    let n = pc.data.len() / stride;
+    Some(CloudLayout {
+        stride,
+        xyz: [x, y, z],
+        class_offset,
+    })
+}
+
+/// A field's type and offset, when the type is a known one and the field fits in a point.
+fn packed_field(
+    c: &mut Checker,
+    path: &str,
+    field: &v1::PackedElementField,
+    stride: usize,
+) -> Option<(v1::NumericType, usize)> {
+    let Ok(ty) = v1::NumericType::try_from(field.r#type) else {
+        c.bad(
+            format!("{path}.type"),
+            format!("{} is not a NumericType", field.r#type),
+        );
+        return None;
+    };
+    let Some(size) = numeric_size(ty) else {
+        c.bad(
+            format!("{path}.type"),
+            "must be set (NUMERIC_TYPE_UNSPECIFIED)",
+        );
+        return None;
+    };
+    let offset = field.offset as usize;
+    if stride > 0 && offset + size > stride {
+        c.bad(
+            format!("{path}.offset"),
+            format!(
+                "field {:?} at offset {offset} with {size} bytes overruns point_stride {stride}",
+                field.name
+            ),
+        );
+        return None;
+    }
+    Some((ty, offset))
+}
+
+/// How to read the coordinate field `name`: float32 or float64.
+fn coordinate(
+    c: &mut Checker,
+    path: &str,
+    name: &str,
+    ty: v1::NumericType,
+    offset: usize,
+) -> Option<Coord> {
+    match ty {
+        v1::NumericType::Float32 => Some(Coord::F32(offset)),
+        v1::NumericType::Float64 => Some(Coord::F64(offset)),
+        other => {
+            c.bad(
+                format!("{path}.type"),
+                format!(
+                    "{name:?} must be FLOAT32 or FLOAT64, not {}",
+                    other.as_str_name()
+                ),
+            );
+            None
+        }
+    }
+}
+
+/// The points and (when the layout has them) the classes of `data`, at `pose`; `None` at the
+/// first point with a coordinate that is not finite and within [`MAX_COORDINATE_M`], or a class
+/// that is not a `SemanticClass`.
+fn read_points(
+    c: &mut Checker,
+    data: &[u8],
+    layout: &CloudLayout,
+    pose: Isometry3<f64>,
+) -> Option<Cloud> {
+    let n = data.len() / layout.stride;
     let mut points = Vec::with_capacity(n);
-    let mut classes = class_offset.map(|_| Vec::with_capacity(n));
-    for (i, p) in pc.data.chunks_exact(stride).enumerate() {
+    let mut classes = layout.class_offset.map(|_| Vec::with_capacity(n));
+    let [x, y, z] = layout.xyz;
+    for (i, p) in data.chunks_exact(layout.stride).enumerate() {
         let v = [x.read(p), y.read(p), z.read(p)];
         if let Some((axis, bad)) = ["x", "y", "z"]
             .iter()
@@ -353,7 +411,7 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
             return None;
         }
         points.push(v);
-        if let (Some(o), Some(classes)) = (class_offset, classes.as_mut()) {
+        if let (Some(o), Some(classes)) = (layout.class_offset, classes.as_mut()) {
             let class = p[o];
             if class > MAX_CLASS {
                 c.bad(
@@ -368,7 +426,7 @@ fn cloud(c: &mut Checker, pc: &v1::PointCloud) -> Option<Cloud> {
     Some(Cloud {
         points,
         classes,
-        pose: pose?,
+        pose,
     })
 }
 
@@ -405,40 +463,7 @@ fn camera_image(
             c.bad(format!("{field}.calibration"), "required");
             None
         }
-        Some(k) => {
-            for (name, v) in [("width", k.width), ("height", k.height)] {
-                if v == 0 || v > MAX_IMAGE_SIDE {
-                    c.bad(
-                        format!("{field}.calibration.{name}"),
-                        format!("{v} is outside 1..={MAX_IMAGE_SIDE}"),
-                    );
-                }
-            }
-            for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
-                if !(v.is_finite() && v > 0.0) {
-                    c.bad(
-                        format!("{field}.calibration.{name}"),
-                        format!("{v} must be a positive focal length in pixels"),
-                    );
-                }
-            }
-            for (name, v) in [("cx", k.cx), ("cy", k.cy)] {
-                if !v.is_finite() {
-                    c.bad(
-                        format!("{field}.calibration.{name}"),
-                        format!("{v} is not finite"),
-                    );
-                }
-            }
-            Some(Intrinsics {
-                width: k.width,
-                height: k.height,
-                fx: k.fx,
-                fy: k.fy,
-                cx: k.cx,
-                cy: k.cy,
-            })
-        }
+        Some(k) => Some(intrinsics(c, field, k)),
     };
     let pixels = match &img.image {
         None => {
@@ -448,100 +473,9 @@ fn camera_image(
             );
             None
         }
-        Some(v1::camera_image::Image::Compressed(ci)) => {
-            let format = match (ci.format.to_ascii_lowercase().as_str(), kind) {
-                ("png", _) => Some("png"),
-                ("jpeg" | "jpg", ImageKind::Colour) => Some("jpeg"),
-                (_, ImageKind::Colour) => {
-                    c.bad(
-                        format!("{field}.compressed.format"),
-                        format!("{:?} is neither \"png\" nor \"jpeg\"", ci.format),
-                    );
-                    None
-                }
-                (_, ImageKind::Classes) => {
-                    c.bad(
-                        format!("{field}.compressed.format"),
-                        format!(
-                            "{:?} is not \"png\" (a class image must be lossless)",
-                            ci.format
-                        ),
-                    );
-                    None
-                }
-            };
-            if ci.data.is_empty() {
-                c.bad(format!("{field}.compressed.data"), "is empty");
-            }
-            format.map(|f| ImagePixels::Encoded {
-                format: f.to_owned(),
-                data: ci.data.to_vec(),
-            })
-        }
+        Some(v1::camera_image::Image::Compressed(ci)) => compressed_pixels(c, field, ci, kind),
         Some(v1::camera_image::Image::Raw(raw)) => {
-            let (encoding, channels) = match kind {
-                ImageKind::Colour => ("rgb8", 3),
-                ImageKind::Classes => ("mono8", 1),
-            };
-            if raw.encoding != encoding {
-                c.bad(
-                    format!("{field}.raw.encoding"),
-                    format!("{:?} is not \"{encoding}\"", raw.encoding),
-                );
-            }
-            if let Some(k) = &intrinsics {
-                if raw.width != k.width {
-                    c.bad(
-                        format!("{field}.raw.width"),
-                        format!("{} does not match calibration.width {}", raw.width, k.width),
-                    );
-                }
-                if raw.height != k.height {
-                    c.bad(
-                        format!("{field}.raw.height"),
-                        format!(
-                            "{} does not match calibration.height {}",
-                            raw.height, k.height
-                        ),
-                    );
-                }
-            }
-            let row = u64::from(raw.width) * channels;
-            if u64::from(raw.step) < row {
-                c.bad(
-                    format!("{field}.raw.step"),
-                    format!("{} is less than width * {channels} = {row}", raw.step),
-                );
-            } else if raw.height > 0 {
-                let needed = u64::from(raw.step) * u64::from(raw.height - 1) + row;
-                if (raw.data.len() as u64) < needed {
-                    c.bad(
-                        format!("{field}.raw.data"),
-                        format!(
-                            "{} bytes; {}x{} {encoding} with step {} needs {needed}",
-                            raw.data.len(),
-                            raw.width,
-                            raw.height,
-                            raw.step
-                        ),
-                    );
-                }
-            }
-            let (width, height, step, data) = (raw.width, raw.height, raw.step, raw.data.to_vec());
-            Some(match kind {
-                ImageKind::Colour => ImagePixels::Rgb8 {
-                    width,
-                    height,
-                    step,
-                    data,
-                },
-                ImageKind::Classes => ImagePixels::Mono8 {
-                    width,
-                    height,
-                    step,
-                    data,
-                },
-            })
+            Some(raw_pixels(c, field, raw, kind, intrinsics.as_ref()))
         }
     };
     if c.violations.len() > before {
@@ -552,6 +486,163 @@ fn camera_image(
         pose: pose?,
         intrinsics: intrinsics?,
     })
+}
+
+/// `frame.<field>.calibration`, its violations recorded.
+fn intrinsics(c: &mut Checker, field: &str, k: &v1::CameraCalibration) -> Intrinsics {
+    for (name, v) in [("width", k.width), ("height", k.height)] {
+        if v == 0 || v > MAX_IMAGE_SIDE {
+            c.bad(
+                format!("{field}.calibration.{name}"),
+                format!("{v} is outside 1..={MAX_IMAGE_SIDE}"),
+            );
+        }
+    }
+    for (name, v) in [("fx", k.fx), ("fy", k.fy)] {
+        if !(v.is_finite() && v > 0.0) {
+            c.bad(
+                format!("{field}.calibration.{name}"),
+                format!("{v} must be a positive focal length in pixels"),
+            );
+        }
+    }
+    for (name, v) in [("cx", k.cx), ("cy", k.cy)] {
+        if !v.is_finite() {
+            c.bad(
+                format!("{field}.calibration.{name}"),
+                format!("{v} is not finite"),
+            );
+        }
+    }
+    Intrinsics {
+        width: k.width,
+        height: k.height,
+        fx: k.fx,
+        fy: k.fy,
+        cx: k.cx,
+        cy: k.cy,
+    }
+}
+
+/// `frame.<field>.compressed`: a format `kind` allows and some bytes.
+fn compressed_pixels(
+    c: &mut Checker,
+    field: &str,
+    ci: &v1::CompressedImage,
+    kind: ImageKind,
+) -> Option<ImagePixels> {
+    let format = match (ci.format.to_ascii_lowercase().as_str(), kind) {
+        ("png", _) => Some("png"),
+        ("jpeg" | "jpg", ImageKind::Colour) => Some("jpeg"),
+        (_, ImageKind::Colour) => {
+            c.bad(
+                format!("{field}.compressed.format"),
+                format!("{:?} is neither \"png\" nor \"jpeg\"", ci.format),
+            );
+            None
+        }
+        (_, ImageKind::Classes) => {
+            c.bad(
+                format!("{field}.compressed.format"),
+                format!(
+                    "{:?} is not \"png\" (a class image must be lossless)",
+                    ci.format
+                ),
+            );
+            None
+        }
+    };
+    if ci.data.is_empty() {
+        c.bad(format!("{field}.compressed.data"), "is empty");
+    }
+    format.map(|f| ImagePixels::Encoded {
+        format: f.to_owned(),
+        data: ci.data.to_vec(),
+    })
+}
+
+/// `frame.<field>.raw`: the encoding `kind` needs, the calibration's size, and enough bytes for
+/// its rows (violations recorded; the pixels are returned as given).
+fn raw_pixels(
+    c: &mut Checker,
+    field: &str,
+    raw: &v1::RawImage,
+    kind: ImageKind,
+    intrinsics: Option<&Intrinsics>,
+) -> ImagePixels {
+    let (encoding, channels) = match kind {
+        ImageKind::Colour => ("rgb8", 3),
+        ImageKind::Classes => ("mono8", 1),
+    };
+    if raw.encoding != encoding {
+        c.bad(
+            format!("{field}.raw.encoding"),
+            format!("{:?} is not \"{encoding}\"", raw.encoding),
+        );
+    }
+    if let Some(k) = intrinsics {
+        check_raw_size(c, field, raw, k);
+    }
+    check_raw_rows(c, field, raw, encoding, channels);
+    let (width, height, step, data) = (raw.width, raw.height, raw.step, raw.data.to_vec());
+    match kind {
+        ImageKind::Colour => ImagePixels::Rgb8 {
+            width,
+            height,
+            step,
+            data,
+        },
+        ImageKind::Classes => ImagePixels::Mono8 {
+            width,
+            height,
+            step,
+            data,
+        },
+    }
+}
+
+/// A raw image is as large as its calibration says.
+fn check_raw_size(c: &mut Checker, field: &str, raw: &v1::RawImage, k: &Intrinsics) {
+    if raw.width != k.width {
+        c.bad(
+            format!("{field}.raw.width"),
+            format!("{} does not match calibration.width {}", raw.width, k.width),
+        );
+    }
+    if raw.height != k.height {
+        c.bad(
+            format!("{field}.raw.height"),
+            format!(
+                "{} does not match calibration.height {}",
+                raw.height, k.height
+            ),
+        );
+    }
+}
+
+/// A raw image's step holds a row, and its data every row.
+fn check_raw_rows(c: &mut Checker, field: &str, raw: &v1::RawImage, encoding: &str, channels: u64) {
+    let row = u64::from(raw.width) * channels;
+    if u64::from(raw.step) < row {
+        c.bad(
+            format!("{field}.raw.step"),
+            format!("{} is less than width * {channels} = {row}", raw.step),
+        );
+    } else if raw.height > 0 {
+        let needed = u64::from(raw.step) * u64::from(raw.height - 1) + row;
+        if (raw.data.len() as u64) < needed {
+            c.bad(
+                format!("{field}.raw.data"),
+                format!(
+                    "{} bytes; {}x{} {encoding} with step {} needs {needed}",
+                    raw.data.len(),
+                    raw.width,
+                    raw.height,
+                    raw.step
+                ),
+            );
+        }
+    }
 }
 
 fn geodetic(c: &mut Checker, g: &v1::GeodeticPoint) -> Option<Geodetic> {
@@ -586,84 +677,94 @@ pub fn options_from(
     options: Option<&v1::PipelineOptions>,
     defaults: &Params,
 ) -> Result<FrameOptions, Error> {
-    let mut c = Checker::new("options");
     let Some(o) = options else {
         return Ok(FrameOptions {
             params: defaults.clone(),
             segmentation_mode: SegmentationMode::Auto,
         });
     };
+    let mut c = Checker::new("options");
     let mut p = defaults.clone();
-    let real = |c: &mut Checker,
-                name: &str,
-                value: Option<f64>,
-                ok: &dyn Fn(f64) -> bool,
-                range: &str,
-                slot: &mut f64| {
-        if let Some(v) = value {
-            if v.is_finite() && ok(v) {
-                *slot = v;
-            } else {
-                c.bad(name, format!("{v} is outside {range}"));
-            }
+    set_real_options(&mut c, o, &mut p);
+    set_count_options(&mut c, o, &mut p);
+    if !o.landable_classes.is_empty() {
+        p.landable_classes = landable_classes(&mut c, &o.landable_classes);
+    }
+    let segmentation_mode = segmentation_mode(&mut c, o.segmentation_mode);
+    c.finish(segmentation_mode.map(|segmentation_mode| FrameOptions {
+        params: p,
+        segmentation_mode,
+    }))
+}
+
+/// Whether a real-valued option is in its range.
+type InRange = fn(f64) -> bool;
+
+/// The real-valued options, each checked against its range (finite, and as shown in the error)
+/// and set where the request sets it.
+fn set_real_options(c: &mut Checker, o: &v1::PipelineOptions, p: &mut Params) {
+    let reals: [(&str, Option<f64>, InRange, &str, &mut f64); 7] = [
+        (
+            "max_triangle_edge_m",
+            o.max_triangle_edge_m,
+            |v| v > 0.0 && v <= 1000.0,
+            "(0, 1000]",
+            &mut p.l_max_m,
+        ),
+        (
+            "min_normal_dot",
+            o.min_normal_dot,
+            |v| (0.0..1.0).contains(&v),
+            "[0, 1)",
+            &mut p.dot_min,
+        ),
+        (
+            "max_triangle_height_m",
+            o.max_triangle_height_m,
+            |v| (0.0..=100.0).contains(&v),
+            "[0, 100]",
+            &mut p.z_min_m,
+        ),
+        (
+            "polylabel_precision_m",
+            o.polylabel_precision_m,
+            |v| (0.001..=100.0).contains(&v),
+            "[0.001, 100]",
+            &mut p.polylabel_precision_m,
+        ),
+        (
+            "min_safe_radius_m",
+            o.min_safe_radius_m,
+            |v| (0.0..=1e4).contains(&v),
+            "[0, 1e4]",
+            &mut p.min_safe_radius_m,
+        ),
+        (
+            "min_area_m2",
+            o.min_area_m2,
+            |v| (0.0..=1e8).contains(&v),
+            "[0, 1e8]",
+            &mut p.min_area_m2,
+        ),
+        (
+            "min_hole_area_m2",
+            o.min_hole_area_m2,
+            |v| (0.0..=1e8).contains(&v),
+            "[0, 1e8]",
+            &mut p.min_hole_area_m2,
+        ),
+    ];
+    for (name, value, ok, range, slot) in reals {
+        match value {
+            Some(v) if v.is_finite() && ok(v) => *slot = v,
+            Some(v) => c.bad(name, format!("{v} is outside {range}")),
+            None => {}
         }
-    };
-    real(
-        &mut c,
-        "max_triangle_edge_m",
-        o.max_triangle_edge_m,
-        &|v| v > 0.0 && v <= 1000.0,
-        "(0, 1000]",
-        &mut p.l_max_m,
-    );
-    real(
-        &mut c,
-        "min_normal_dot",
-        o.min_normal_dot,
-        &|v| (0.0..1.0).contains(&v),
-        "[0, 1)",
-        &mut p.dot_min,
-    );
-    real(
-        &mut c,
-        "max_triangle_height_m",
-        o.max_triangle_height_m,
-        &|v| (0.0..=100.0).contains(&v),
-        "[0, 100]",
-        &mut p.z_min_m,
-    );
-    real(
-        &mut c,
-        "polylabel_precision_m",
-        o.polylabel_precision_m,
-        &|v| (0.001..=100.0).contains(&v),
-        "[0.001, 100]",
-        &mut p.polylabel_precision_m,
-    );
-    real(
-        &mut c,
-        "min_safe_radius_m",
-        o.min_safe_radius_m,
-        &|v| (0.0..=1e4).contains(&v),
-        "[0, 1e4]",
-        &mut p.min_safe_radius_m,
-    );
-    real(
-        &mut c,
-        "min_area_m2",
-        o.min_area_m2,
-        &|v| (0.0..=1e8).contains(&v),
-        "[0, 1e8]",
-        &mut p.min_area_m2,
-    );
-    real(
-        &mut c,
-        "min_hole_area_m2",
-        o.min_hole_area_m2,
-        &|v| (0.0..=1e8).contains(&v),
-        "[0, 1e8]",
-        &mut p.min_hole_area_m2,
-    );
+    }
+}
+
+/// `min_region_triangles` and `max_sites` (0: the server's default).
+fn set_count_options(c: &mut Checker, o: &v1::PipelineOptions, p: &mut Params) {
     if let Some(n) = o.min_region_triangles {
         if n > 10_000_000 {
             c.bad("min_region_triangles", format!("{n} is above 1e7"));
@@ -676,37 +777,38 @@ pub fn options_from(
         Some(n) if n <= 1000 => p.max_sites = n as usize,
         Some(n) => c.bad("max_sites", format!("{n} is above 1000")),
     }
-    if !o.landable_classes.is_empty() {
-        let mut classes = Vec::with_capacity(o.landable_classes.len());
-        for (i, &v) in o.landable_classes.iter().enumerate() {
-            match v1::SemanticClass::try_from(v) {
-                Ok(v1::SemanticClass::Unspecified) => c.bad(
-                    format!("landable_classes[{i}]"),
-                    "SEMANTIC_CLASS_UNSPECIFIED is not a landable class",
-                ),
-                Ok(class) => classes.push(class as u8),
-                Err(_) => c.bad(
-                    format!("landable_classes[{i}]"),
-                    format!("{v} is not a SemanticClass"),
-                ),
-            }
+}
+
+/// The landable classes as class ids; each unknown or unspecified one is a violation.
+fn landable_classes(c: &mut Checker, asked: &[i32]) -> Vec<u8> {
+    let mut classes = Vec::with_capacity(asked.len());
+    for (i, &v) in asked.iter().enumerate() {
+        match v1::SemanticClass::try_from(v) {
+            Ok(v1::SemanticClass::Unspecified) => c.bad(
+                format!("landable_classes[{i}]"),
+                "SEMANTIC_CLASS_UNSPECIFIED is not a landable class",
+            ),
+            Ok(class) => classes.push(class as u8),
+            Err(_) => c.bad(
+                format!("landable_classes[{i}]"),
+                format!("{v} is not a SemanticClass"),
+            ),
         }
-        p.landable_classes = classes;
     }
-    let segmentation_mode = match v1::SegmentationMode::try_from(o.segmentation_mode) {
+    classes
+}
+
+fn segmentation_mode(c: &mut Checker, mode: i32) -> Option<SegmentationMode> {
+    match v1::SegmentationMode::try_from(mode) {
         Ok(m) => Some(SegmentationMode::from(m)),
         Err(_) => {
             c.bad(
                 "segmentation_mode",
-                format!("{} is not a SegmentationMode", o.segmentation_mode),
+                format!("{mode} is not a SegmentationMode"),
             );
             None
         }
-    };
-    c.finish(segmentation_mode.map(|segmentation_mode| FrameOptions {
-        params: p,
-        segmentation_mode,
-    }))
+    }
 }
 
 impl From<v1::SegmentationMode> for SegmentationMode {
@@ -739,38 +841,40 @@ pub fn fusion_map(
     asked: &v1::FusionOptions,
     defaults: &landing_fusion::FusionParams,
 ) -> Result<StreamMap, Error> {
-    let mut p = *defaults;
+    let mut p = FusionConfig::from(defaults);
     if let Some(v) = asked.max_cells {
-        if v as usize > defaults.max_cells {
+        if v > p.max_cells {
             return Err(Error::invalid(
                 "fusion.max_cells",
-                format!("{v} is above this server's limit of {}", defaults.max_cells),
+                format!("{v} is above this server's limit of {}", p.max_cells),
             ));
         }
-        p.max_cells = v as usize;
+        p.max_cells = v;
     }
-    p.cell_m = asked.cell_size_m.unwrap_or(p.cell_m);
+    p.cell_size_m = asked.cell_size_m.unwrap_or(p.cell_size_m);
     p.horizon_s = asked.horizon_s.unwrap_or(p.horizon_s);
-    p.keep_out_frames = asked
-        .keep_out_frames
-        .map_or(p.keep_out_frames, |v| v as usize);
+    p.keep_out_frames = asked.keep_out_frames.unwrap_or(p.keep_out_frames);
     p.max_jump_m = asked.max_jump_m.unwrap_or(p.max_jump_m);
-    p.register = asked.register_scans.unwrap_or(p.register);
-    p.max_footprint_m = asked.max_pixel_footprint_m.unwrap_or(p.max_footprint_m);
-    StreamMap::new(p).map_err(|e| Error::invalid(format!("fusion.{}", e.field()), e.to_string()))
+    p.register_scans = asked.register_scans.unwrap_or(p.register_scans);
+    p.max_pixel_footprint_m = asked
+        .max_pixel_footprint_m
+        .unwrap_or(p.max_pixel_footprint_m);
+    StreamMap::new(p.params())
+        .map_err(|e| Error::invalid(format!("fusion.{}", e.field()), e.to_string()))
 }
 
 /// The server's fusion defaults as the proto reports them (`ServiceInfo.default_fusion`).
 pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
+    let p = FusionConfig::from(p);
     v1::FusionOptions {
-        enabled: false,
-        cell_size_m: Some(p.cell_m),
+        cell_size_m: Some(p.cell_size_m),
         horizon_s: Some(p.horizon_s),
-        max_cells: Some(u32::try_from(p.max_cells).unwrap_or(u32::MAX)),
-        keep_out_frames: Some(u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX)),
+        max_cells: Some(p.max_cells),
+        keep_out_frames: Some(p.keep_out_frames),
         max_jump_m: Some(p.max_jump_m),
-        register_scans: Some(p.register),
-        max_pixel_footprint_m: Some(p.max_footprint_m),
+        register_scans: Some(p.register_scans),
+        max_pixel_footprint_m: Some(p.max_pixel_footprint_m),
+        ..Default::default()
     }
 }
 

@@ -53,25 +53,15 @@ impl PointView {
 pub struct Segmenter {
     sessions: Vec<landing_perception::Segmenter>,
     next: AtomicUsize,
-    /// The input sizes of every frame, finest first (the masks are fused).
+    /// The input sizes of a frame judged alone, finest first (the masks are fused); a fused
+    /// stream's frames run the first alone.
     sizes: Vec<(u32, u32)>,
-    /// `segmentation.min_confidence` as the model's confidence byte (255 × probability); `None`
-    /// when off.
-    min_confidence: Option<u8>,
-    /// `segmentation.stream_every_size`: a fused stream's frames run every size, not the first.
-    stream_every_size: bool,
 }
 
 impl Segmenter {
     /// Loads the model and its sessions as `[segmentation]` says.
     pub fn load(config: &SegmentationConfig) -> Result<Self, Error> {
-        let provider: ExecutionProvider =
-            config
-                .execution_provider
-                .parse()
-                .map_err(|e: PerceptionError| {
-                    Error::config("segmentation.execution_provider", e.to_string())
-                })?;
+        let provider = config.execution_provider;
         let perception = SegmenterConfig {
             model_path: config.model_path.clone(),
             execution_provider: provider,
@@ -79,9 +69,9 @@ impl Segmenter {
             ort_library: (!config.ort_library.as_os_str().is_empty())
                 .then(|| config.ort_library.clone()),
             input_size: None,
-            ort_log_level: config.parsed_ort_log_level()?,
+            ort_log_level: config.ort_log_level,
         };
-        let sizes = config.parsed_input_sizes()?;
+        let sizes = config.input_sizes_finest_first();
         let sessions = (0..config.sessions.max(1))
             .map(|_| landing_perception::Segmenter::new(&perception))
             .collect::<Result<Vec<_>, _>>()
@@ -95,18 +85,6 @@ impl Segmenter {
                 "segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU"
             );
         }
-        let min_confidence =
-            (config.min_confidence > 0.0).then(|| (config.min_confidence * 255.0).round() as u8);
-        if min_confidence.is_some() && !sessions[0].info().confidence {
-            return Err(Error::config(
-                "segmentation.min_confidence",
-                format!(
-                    "{} has no `{}` output (models/training/add_confidence.py adds it)",
-                    config.model_path.display(),
-                    landing_perception::CONFIDENCE_OUTPUT
-                ),
-            ));
-        }
         // No sizes: the model's own.
         let sizes = if sizes.is_empty() {
             let i = sessions[0].info();
@@ -118,8 +96,6 @@ impl Segmenter {
             sessions,
             next: AtomicUsize::new(0),
             sizes,
-            min_confidence,
-            stream_every_size: config.stream_every_size,
         })
     }
 
@@ -131,16 +107,13 @@ impl Segmenter {
     pub fn describe(&self) -> String {
         let i = self.info();
         let sizes: Vec<String> = self.sizes.iter().map(|(w, h)| format!("{w}x{h}")).collect();
-        let confidence = self
-            .min_confidence
-            .map_or(String::new(), |c| format!(", confidence ≥ {c}/255"));
-        let streams = if self.sizes.len() > 1 && !self.stream_every_size {
+        let streams = if self.sizes.len() > 1 {
             format!(", streams at {}", sizes[0])
         } else {
             String::new()
         };
         format!(
-            "{} (at {}{streams}{confidence}, {}, {} session(s), sha256 {})",
+            "{} (at {}{streams}, {}, {} session(s), sha256 {})",
             i.name,
             sizes.join(" + "),
             i.execution_provider,
@@ -163,9 +136,8 @@ impl Segmenter {
     }
 
     /// Segments the decoded `image` at the input sizes `judged` names (every one, or a fused
-    /// stream's first alone), makes unknown the landable pixels the model is not confident
-    /// enough in (`segmentation.min_confidence`), and fuses the masks (a pixel is landable only
-    /// where every size says so). The obstacle rays always come from the fused mask; the points
+    /// stream's first alone) and fuses the masks (a pixel is landable only where every size
+    /// says so). The obstacle rays always come from the fused mask; the points
     /// take their classes from the mask `judged` names, then as [`classify_with_mask`] does.
     pub fn classify(
         &self,
@@ -179,25 +151,13 @@ impl Segmenter {
         let t0 = Instant::now();
         let session =
             &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
-        let landable_class = |c: u8| landable.contains(&c);
         let sizes = match judged {
-            Judged::InStream if !self.stream_every_size => &self.sizes[..1],
-            Judged::Alone | Judged::InStream => &self.sizes[..],
+            Judged::Alone => &self.sizes[..],
+            Judged::InStream => &self.sizes[..1],
         };
         let masks = sizes
             .iter()
-            .map(|&(w, h)| {
-                let Some(min) = self.min_confidence else {
-                    return session.segment_at(image, w, h);
-                };
-                let s = session.segment_with_confidence_at(image, w, h)?;
-                let mut mask = s.mask;
-                // `load` checked that the model has the output.
-                if let Some(confidence) = s.confidence {
-                    mask.demote_unconfident(&confidence, min, landable_class)?;
-                }
-                Ok(mask)
-            })
+            .map(|&(w, h)| session.segment_at(image, w, h))
             .collect::<Result<Vec<_>, PerceptionError>>()
             .map_err(|e| model_error(&e))?;
         let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
@@ -237,10 +197,9 @@ pub enum Judged {
     /// frames are kept. The points take the first (finest) input size's mask alone, the one
     /// with the highest rooftop recall: the guard's lost recall buys no safety the votes and
     /// the footprints do not already give (EVALUATION.md, "Fused points from the finest
-    /// mask"). Unless `segmentation.stream_every_size` is set, that size is the only one run,
-    /// and casts the footprints too (EVALUATION.md, "One input size in streams"); with it,
-    /// the footprints keep every size's obstacles. A wall the scan hit casts nothing ([`ObstacleRays::new`]): its sweep kept a
-    /// band of free roof clear in front of every far parapet. A small obstacle the model calls
+    /// mask"). That size is the only one run, and casts the footprints too (EVALUATION.md, "One
+    /// input size in streams"). A wall the scan hit casts nothing ([`ObstacleRays::new`]): its
+    /// sweep kept a band of free roof clear in front of every far parapet. A small obstacle the model calls
     /// wall beside a real one loses its footprint in that frame, not in the stream's other
     /// kept frames (EVALUATION.md, "Walls the scan hit").
     InStream,

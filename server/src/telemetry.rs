@@ -32,10 +32,9 @@ pub fn init_tracing(log: &LogConfig) -> Result<(), Error> {
         .with_env_filter(filter)
         .with_writer(std::io::stderr);
     // A second install (several servers in one test process) keeps the first subscriber.
-    let _ = if log.format == "json" {
-        builder.json().try_init()
-    } else {
-        builder.try_init()
+    let _ = match log.format {
+        crate::config::LogFormat::Json => builder.json().try_init(),
+        crate::config::LogFormat::Pretty => builder.try_init(),
     };
     Ok(())
 }

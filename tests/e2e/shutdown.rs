@@ -163,7 +163,7 @@ async fn sigterm_drains_a_stream() {
     // another test's server to take.
     let mut config = server_config();
     config.server.listen = "127.0.0.1:0".into();
-    config.log.format = "json".into();
+    config.log.format = landing_server::config::LogFormat::Json;
     config.log.filter = "info".into();
     let path = scratch().join(format!("server-{}.toml", std::process::id()));
     std::fs::write(&path, config.to_toml()).expect("write the config");
