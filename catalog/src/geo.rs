@@ -32,7 +32,10 @@ pub struct LatLon {
 impl LatLon {
     /// The point at `latitude_deg`, `longitude_deg`.
     pub const fn new(latitude_deg: f64, longitude_deg: f64) -> Self {
-        LatLon { latitude_deg, longitude_deg }
+        LatLon {
+            latitude_deg,
+            longitude_deg,
+        }
     }
 
     /// Fails naming `field.latitude_deg` or `field.longitude_deg` when either is not finite or is
@@ -69,7 +72,10 @@ pub struct Polygon {
 impl Polygon {
     /// A polygon from its outer ring and holes; a closing point equal to the first is dropped.
     pub fn new(exterior: Vec<LatLon>, holes: Vec<Vec<LatLon>>) -> Self {
-        Polygon { exterior: open_ring(exterior), holes: holes.into_iter().map(open_ring).collect() }
+        Polygon {
+            exterior: open_ring(exterior),
+            holes: holes.into_iter().map(open_ring).collect(),
+        }
     }
 
     /// The axis-aligned rectangle with `south_west` and `north_east` corners.
@@ -77,7 +83,12 @@ impl Polygon {
         let (s, w) = (south_west.latitude_deg, south_west.longitude_deg);
         let (n, e) = (north_east.latitude_deg, north_east.longitude_deg);
         Polygon::new(
-            vec![LatLon::new(s, w), LatLon::new(s, e), LatLon::new(n, e), LatLon::new(n, w)],
+            vec![
+                LatLon::new(s, w),
+                LatLon::new(s, e),
+                LatLon::new(n, e),
+                LatLon::new(n, w),
+            ],
             vec![],
         )
     }
@@ -100,10 +111,16 @@ impl Polygon {
 
     /// The area in square metres: the outer ring's less its holes'.
     pub fn area_m2(&self) -> f64 {
-        let Some(&origin) = self.exterior.first() else { return 0.0 };
+        let Some(&origin) = self.exterior.first() else {
+            return 0.0;
+        };
         let frame = LocalFrame::new(origin);
         let outer = ring_signed_area(&frame.ring(&self.exterior)).abs();
-        let holes: f64 = self.holes.iter().map(|h| ring_signed_area(&frame.ring(h)).abs()).sum();
+        let holes: f64 = self
+            .holes
+            .iter()
+            .map(|h| ring_signed_area(&frame.ring(h)).abs())
+            .sum();
         (outer - holes).max(0.0)
     }
 
@@ -134,7 +151,9 @@ impl Polygon {
     /// The pole of inaccessibility: the point inside the polygon farthest from its boundary and
     /// holes, with that distance in metres, found to within `precision_m` (polylabel's cell search).
     pub fn inscribed_circle(&self, precision_m: f64) -> (LatLon, f64) {
-        let Some(&origin) = self.exterior.first() else { return (LatLon::default(), 0.0) };
+        let Some(&origin) = self.exterior.first() else {
+            return (LatLon::default(), 0.0);
+        };
         let frame = LocalFrame::new(origin);
         let rings: Vec<Vec<(f64, f64)>> = self.rings().map(|r| frame.ring(r)).collect();
         let (x, y, d) = polylabel(&rings, precision_m.max(1e-3));
@@ -279,7 +298,10 @@ impl LocalFrame {
 /// The signed area of a ring in lon/lat degrees (planar): positive when counter-clockwise (east
 /// right, north up). The GeoJSON writer orients rings with it.
 pub fn ring_orientation(ring: &[LatLon]) -> f64 {
-    let pts: Vec<(f64, f64)> = ring.iter().map(|p| (p.longitude_deg, p.latitude_deg)).collect();
+    let pts: Vec<(f64, f64)> = ring
+        .iter()
+        .map(|p| (p.longitude_deg, p.latitude_deg))
+        .collect();
     ring_signed_area(&pts)
 }
 
@@ -300,21 +322,28 @@ fn validate_ring(ring: &[LatLon], field: &str) -> Result<()> {
     for (i, p) in ring.iter().enumerate() {
         p.validate(&format!("{field}[{i}]"))?;
     }
-    let mut distinct: Vec<(u64, u64)> =
-        ring.iter().map(|p| (p.latitude_deg.to_bits(), p.longitude_deg.to_bits())).collect();
+    let mut distinct: Vec<(u64, u64)> = ring
+        .iter()
+        .map(|p| (p.latitude_deg.to_bits(), p.longitude_deg.to_bits()))
+        .collect();
     distinct.sort_unstable();
     distinct.dedup();
     if distinct.len() < 3 {
         return Err(Error::invalid(
             field,
-            format!("a ring needs at least 3 distinct points, it has {}", distinct.len()),
+            format!(
+                "a ring needs at least 3 distinct points, it has {}",
+                distinct.len()
+            ),
         ));
     }
     let b = ring.iter().fold(Bbox::EMPTY, |b, p| b.including(*p));
     if b.max_lat - b.min_lat > MAX_SPAN_DEG || b.max_lon - b.min_lon > MAX_SPAN_DEG {
         return Err(Error::invalid(
             field,
-            format!("the ring spans more than {MAX_SPAN_DEG} degrees (or crosses the antimeridian)"),
+            format!(
+                "the ring spans more than {MAX_SPAN_DEG} degrees (or crosses the antimeridian)"
+            ),
         ));
     }
     Ok(())
@@ -349,20 +378,29 @@ fn point_in_ring(ring: &[(f64, f64)], (x, y): (f64, f64)) -> bool {
 fn segment_distance(p: (f64, f64), a: (f64, f64), b: (f64, f64)) -> f64 {
     let (dx, dy) = (b.0 - a.0, b.1 - a.1);
     let len2 = dx * dx + dy * dy;
-    let t = if len2 > 0.0 { (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+    let t = if len2 > 0.0 {
+        (((p.0 - a.0) * dx + (p.1 - a.1) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
     let (cx, cy) = (a.0 + t * dx, a.1 + t * dy);
     ((p.0 - cx).powi(2) + (p.1 - cy).powi(2)).sqrt()
 }
 
 fn ring_distance(p: (f64, f64), ring: &[(f64, f64)]) -> f64 {
     let n = ring.len();
-    (0..n).map(|i| segment_distance(p, ring[i], ring[(i + 1) % n])).fold(f64::INFINITY, f64::min)
+    (0..n)
+        .map(|i| segment_distance(p, ring[i], ring[(i + 1) % n]))
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Signed distance from `p` to the polygon (`rings[0]` outer): positive inside.
 fn signed_distance(rings: &[Vec<(f64, f64)>], p: (f64, f64)) -> f64 {
     let inside = point_in_ring(&rings[0], p) && !rings[1..].iter().any(|h| point_in_ring(h, p));
-    let d = rings.iter().map(|r| ring_distance(p, r)).fold(f64::INFINITY, f64::min);
+    let d = rings
+        .iter()
+        .map(|r| ring_distance(p, r))
+        .fold(f64::INFINITY, f64::min);
     if inside { d } else { -d }
 }
 
@@ -394,10 +432,20 @@ fn polylabel(rings: &[Vec<(f64, f64)>], precision: f64) -> (f64, f64, f64) {
     }
     let cell = |x: f64, y: f64, h: f64| {
         let d = signed_distance(rings, (x, y));
-        Cell { x, y, h, d, max: d + h * std::f64::consts::SQRT_2 }
+        Cell {
+            x,
+            y,
+            h,
+            d,
+            max: d + h * std::f64::consts::SQRT_2,
+        }
     };
-    let (mut min_x, mut min_y, mut max_x, mut max_y) =
-        (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    let (mut min_x, mut min_y, mut max_x, mut max_y) = (
+        f64::INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::NEG_INFINITY,
+    );
     for &(x, y) in &rings[0] {
         (min_x, min_y, max_x, max_y) = (min_x.min(x), min_y.min(y), max_x.max(x), max_y.max(y));
     }
@@ -418,7 +466,9 @@ fn polylabel(rings: &[Vec<(f64, f64)>], precision: f64) -> (f64, f64, f64) {
     }
     // The centroid of the outer ring's vertices is a cheap first guess.
     let n = rings[0].len() as f64;
-    let (cx, cy) = rings[0].iter().fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + x / n, sy + y / n));
+    let (cx, cy) = rings[0]
+        .iter()
+        .fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + x / n, sy + y / n));
     let mut best = cell(cx, cy, 0.0);
     // Bounded: a degenerate ring cannot make the search spin.
     let mut budget = 100_000_usize;
@@ -447,7 +497,10 @@ mod tests {
 
     fn square(center: LatLon, half_m: f64) -> Polygon {
         let f = LocalFrame::new(center);
-        Polygon::rectangle(f.to_lat_lon((-half_m, -half_m)), f.to_lat_lon((half_m, half_m)))
+        Polygon::rectangle(
+            f.to_lat_lon((-half_m, -half_m)),
+            f.to_lat_lon((half_m, half_m)),
+        )
     }
 
     const MANHATTAN: LatLon = LatLon::new(40.7484, -73.9857);
@@ -491,7 +544,10 @@ mod tests {
         let (c, r) = p.inscribed_circle(0.05);
         assert!((r - 5.0).abs() < 0.06, "{r}");
         let (x, y) = f.to_xy(c);
-        assert!((y - 5.0).abs() < 0.1 && (5.0..=25.0).contains(&x), "{x} {y}");
+        assert!(
+            (y - 5.0).abs() < 0.1 && (5.0..=25.0).contains(&x),
+            "{x} {y}"
+        );
     }
 
     #[test]

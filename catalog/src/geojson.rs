@@ -35,11 +35,18 @@ use crate::model::{Candidate, SiteKind};
 use crate::query::Found;
 
 /// The properties read as a roof height, in order of preference.
-pub const HEIGHT_PROPERTIES: [&str; 6] =
-    ["roof_height_m", "roof_height", "height_m", "height", "building:height", "HEIGHT"];
+pub const HEIGHT_PROPERTIES: [&str; 6] = [
+    "roof_height_m",
+    "roof_height",
+    "height_m",
+    "height",
+    "building:height",
+    "HEIGHT",
+];
 
 /// The properties read as a ground elevation added to the height.
-pub const GROUND_PROPERTIES: [&str; 3] = ["ground_elevation_m", "ground_elevation", "base_elevation"];
+pub const GROUND_PROPERTIES: [&str; 3] =
+    ["ground_elevation_m", "ground_elevation", "base_elevation"];
 
 /// The candidates in a GeoJSON text (see the module docs). Every candidate is validated.
 pub fn read_candidates(text: &str) -> Result<Vec<Candidate>> {
@@ -68,7 +75,10 @@ pub fn read_candidates(text: &str) -> Result<Vec<Candidate>> {
         let height = find_number(props, &HEIGHT_PROPERTIES, &field)?.ok_or_else(|| {
             Error::invalid(
                 format!("{field}.properties.height"),
-                format!("no roof height: expected one of {}", HEIGHT_PROPERTIES.join(", ")),
+                format!(
+                    "no roof height: expected one of {}",
+                    HEIGHT_PROPERTIES.join(", ")
+                ),
             )
         })?;
         let ground = find_number(props, &GROUND_PROPERTIES, &field)?.unwrap_or(0.0);
@@ -111,7 +121,11 @@ pub fn read_candidates(text: &str) -> Result<Vec<Candidate>> {
                 (Some(id), _) => Some(format!("{id}#{i}")),
                 (None, _) => None,
             };
-            let c = Candidate { footprint, roof_height_m: ground + height, source_id };
+            let c = Candidate {
+                footprint,
+                roof_height_m: ground + height,
+                source_id,
+            };
             c.validate(&field)?;
             out.push(c);
         }
@@ -140,7 +154,10 @@ pub fn write_results(results: &[Found]) -> Value {
             p.insert("area_m2".into(), json!(s.area_m2));
             if s.kind == SiteKind::Confirmed {
                 p.insert("first_seen".into(), json!(s.first_seen.to_rfc3339()));
-                p.insert("last_confirmed".into(), json!(s.last_confirmed.to_rfc3339()));
+                p.insert(
+                    "last_confirmed".into(),
+                    json!(s.last_confirmed.to_rfc3339()),
+                );
                 p.insert("frames".into(), json!(s.frames));
                 p.insert("approaches".into(), json!(s.approaches));
                 p.insert("drone_id".into(), json!(s.drone_id));
@@ -171,7 +188,11 @@ pub fn polygon_geometry(p: &Polygon, rfc7946_orientation: bool) -> Value {
         if let Some(&first) = pts.first() {
             pts.push(first);
         }
-        Value::Array(pts.iter().map(|q| json!([q.longitude_deg, q.latitude_deg])).collect())
+        Value::Array(
+            pts.iter()
+                .map(|q| json!([q.longitude_deg, q.latitude_deg]))
+                .collect(),
+        )
     };
     let mut rings = vec![ring(&p.exterior, true)];
     rings.extend(p.holes.iter().map(|h| ring(h, false)));
@@ -187,14 +208,20 @@ pub fn polygon_from_coordinates(c: &Value, field: &str) -> Result<Polygon> {
         .ok_or_else(|| Error::invalid(field, "expected an array of rings"))?;
     let mut parsed = Vec::with_capacity(rings.len());
     for (i, r) in rings.iter().enumerate() {
-        let pts = r
-            .as_array()
-            .ok_or_else(|| Error::invalid(format!("{field}[{i}]"), "expected an array of positions"))?;
+        let pts = r.as_array().ok_or_else(|| {
+            Error::invalid(format!("{field}[{i}]"), "expected an array of positions")
+        })?;
         let mut ring = Vec::with_capacity(pts.len());
         for (j, pt) in pts.iter().enumerate() {
-            let xy = pt.as_array().filter(|a| a.len() >= 2).and_then(|a| Some((a[0].as_f64()?, a[1].as_f64()?)));
+            let xy = pt
+                .as_array()
+                .filter(|a| a.len() >= 2)
+                .and_then(|a| Some((a[0].as_f64()?, a[1].as_f64()?)));
             let (lon, lat) = xy.ok_or_else(|| {
-                Error::invalid(format!("{field}[{i}][{j}]"), "expected [longitude, latitude]")
+                Error::invalid(
+                    format!("{field}[{i}][{j}]"),
+                    "expected [longitude, latitude]",
+                )
             })?;
             ring.push(LatLon::new(lat, lon));
         }
@@ -204,7 +231,11 @@ pub fn polygon_from_coordinates(c: &Value, field: &str) -> Result<Polygon> {
     Ok(Polygon::new(exterior, parsed))
 }
 
-fn find_number(props: Option<&Map<String, Value>>, names: &[&str], field: &str) -> Result<Option<f64>> {
+fn find_number(
+    props: Option<&Map<String, Value>>,
+    names: &[&str],
+    field: &str,
+) -> Result<Option<f64>> {
     let Some(props) = props else { return Ok(None) };
     for name in names {
         let Some(v) = props.get(*name) else { continue };
@@ -248,7 +279,11 @@ mod tests {
         assert_eq!(c.len(), 3);
         assert_eq!(c[0].roof_height_m, 52.5);
         assert_eq!(c[0].source_id.as_deref(), Some("bldg-1"));
-        assert_eq!(c[0].footprint.exterior.len(), 4, "the closing point is dropped");
+        assert_eq!(
+            c[0].footprint.exterior.len(),
+            4,
+            "the closing point is dropped"
+        );
         assert_eq!(c[1].roof_height_m, 30.0);
         assert_eq!(c[2].source_id.as_deref(), Some("7#1"));
     }
@@ -258,7 +293,10 @@ mod tests {
         let no_height = FOOTPRINTS.replace("\"height\": 42.5", "\"name\": \"x\"");
         let e = read_candidates(&no_height).unwrap_err();
         assert_eq!(e.field(), Some("features[0].properties.height"));
-        let point = FOOTPRINTS.replace("\"Polygon\", \"coordinates\": [[[-73.9860", "\"Point\", \"coordinates\": [[[-73.9860");
+        let point = FOOTPRINTS.replace(
+            "\"Polygon\", \"coordinates\": [[[-73.9860",
+            "\"Point\", \"coordinates\": [[[-73.9860",
+        );
         let e = read_candidates(&point).unwrap_err();
         assert_eq!(e.field(), Some("features[0].geometry.type"));
         let bad = FOOTPRINTS.replace("\"30 m\"", "\"tall\"");
@@ -271,7 +309,12 @@ mod tests {
     #[test]
     fn written_rings_are_closed_and_counter_clockwise() {
         let cw = Polygon::new(
-            vec![LatLon::new(0.0, 0.0), LatLon::new(0.001, 0.0), LatLon::new(0.001, 0.001), LatLon::new(0.0, 0.001)],
+            vec![
+                LatLon::new(0.0, 0.0),
+                LatLon::new(0.001, 0.0),
+                LatLon::new(0.001, 0.001),
+                LatLon::new(0.0, 0.001),
+            ],
             vec![],
         );
         assert!(ring_orientation(&cw.exterior) < 0.0);

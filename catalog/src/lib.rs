@@ -94,7 +94,7 @@ mod time;
 
 pub use error::{Error, Result};
 pub use geo::{Bbox, LatLon, LocalFrame, Polygon, distance_m};
-pub use model::{Candidate, ObservedSite, Observation, Site, SiteId, SiteKind};
+pub use model::{Candidate, Observation, ObservedSite, Site, SiteId, SiteKind};
 pub use postgis::PostgisStore;
 pub use query::{
     DEFAULT_MAX_AGE, DEFAULT_PAGE_SIZE, Found, MAX_PAGE_SIZE, MAX_SEARCH_RADIUS_M, Order,

@@ -71,7 +71,9 @@ pub struct Site {
 impl Site {
     /// The box the stores index a record by: its polygon's and its safe circle's.
     pub fn bbox(&self) -> Bbox {
-        self.polygon.bbox().union(Bbox::around(self.center, self.safe_radius_m))
+        self.polygon
+            .bbox()
+            .union(Bbox::around(self.center, self.safe_radius_m))
     }
 }
 
@@ -131,12 +133,18 @@ impl Observation {
             {
                 return Err(Error::invalid(
                     format!("{f}.safe_radius_m"),
-                    format!("{} is not a radius in (0, {MAX_RADIUS_M}] m", s.safe_radius_m),
+                    format!(
+                        "{} is not a radius in (0, {MAX_RADIUS_M}] m",
+                        s.safe_radius_m
+                    ),
                 ));
             }
             check_height(s.plane_height_m, &format!("{f}.plane_height_m"))?;
             if s.frames == 0 {
-                return Err(Error::invalid(format!("{f}.frames"), "0: a site is seen by at least one frame"));
+                return Err(Error::invalid(
+                    format!("{f}.frames"),
+                    "0: a site is seen by at least one frame",
+                ));
             }
         }
         Ok(())
@@ -145,9 +153,10 @@ impl Observation {
     /// The box of everything this observation can change: its seen area and its sites' circles.
     pub fn reach(&self) -> Bbox {
         let seen = self.seen.iter().fold(Bbox::EMPTY, |b, p| b.union(p.bbox()));
-        self.sites
-            .iter()
-            .fold(seen, |b, s| b.union(Bbox::around(s.center, s.safe_radius_m)).union(s.polygon.bbox()))
+        self.sites.iter().fold(seen, |b, s| {
+            b.union(Bbox::around(s.center, s.safe_radius_m))
+                .union(s.polygon.bbox())
+        })
     }
 }
 
@@ -200,7 +209,10 @@ impl Candidate {
 
 fn check_id(id: &str, field: &str) -> Result<()> {
     if id.len() > MAX_ID_BYTES {
-        return Err(Error::invalid(field, format!("{} bytes, more than {MAX_ID_BYTES}", id.len())));
+        return Err(Error::invalid(
+            field,
+            format!("{} bytes, more than {MAX_ID_BYTES}", id.len()),
+        ));
     }
     Ok(())
 }

@@ -46,7 +46,7 @@ use crate::time::Timestamp;
 const BACKEND: &str = "postgis";
 
 /// The advisory lock key every catalog writer takes (`pg_advisory_xact_lock`): "landcat" in ASCII.
-pub const WRITE_LOCK: i64 = 0x6c61_6e64_6361_74;
+pub const WRITE_LOCK: i64 = 0x006c_616e_6463_6174;
 
 const MIGRATIONS: &[&str] = &[r#"
 CREATE EXTENSION IF NOT EXISTS postgis;
@@ -106,7 +106,10 @@ impl PostgisStore {
     /// `connect_timeout=5` is worth setting) and brings the schema up to date. The database user
     /// needs `CREATE` there, and the PostGIS extension must exist or be creatable.
     pub fn connect(url: &str) -> Result<Self> {
-        let store = PostgisStore { url: url.to_string(), client: Mutex::new(None) };
+        let store = PostgisStore {
+            url: url.to_string(),
+            client: Mutex::new(None),
+        };
         {
             let mut guard = store.client()?;
             let client = guard.as_mut().ok_or_else(disconnected)?;
@@ -120,7 +123,10 @@ impl PostgisStore {
         let mut guard = self.client()?;
         let client = guard.as_mut().ok_or_else(disconnected)?;
         let row = client
-            .query_one("SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version", &[])
+            .query_one(
+                "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+                &[],
+            )
             .map_err(db)?;
         Ok(row.get::<_, i32>(0).max(0) as u32)
     }
@@ -139,7 +145,8 @@ impl PostgisStore {
         let mut guard = self.client()?;
         let client = guard.as_mut().ok_or_else(disconnected)?;
         let mut tx = client.transaction().map_err(db)?;
-        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK]).map_err(db)?;
+        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK])
+            .map_err(db)?;
         let out = f(&mut tx)?;
         tx.commit().map_err(db)?;
         Ok(out)
@@ -166,7 +173,9 @@ impl Store for PostgisStore {
                     format!("(center <-> {POINT})")
                 }
                 (Order::SafeRadius, _) => "(-safe_radius_m)".to_string(),
-                (Order::Freshness, SiteKind::Confirmed) => "(-(last_confirmed_ms::float8))".to_string(),
+                (Order::Freshness, SiteKind::Confirmed) => {
+                    "(-(last_confirmed_ms::float8))".to_string()
+                }
             };
             let cutoff = match kind {
                 SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
@@ -199,7 +208,12 @@ impl Store for PostgisStore {
                 )
                 .map_err(db)?;
             rows.iter()
-                .map(|row| Ok(Found { site: site_from_row(row)?, distance_m: row.get(16) }))
+                .map(|row| {
+                    Ok(Found {
+                        site: site_from_row(row)?,
+                        distance_m: row.get(16),
+                    })
+                })
                 .collect()
         })
     }
@@ -208,9 +222,16 @@ impl Store for PostgisStore {
         let cutoff = now.saturating_sub(retention).unix_ms();
         self.write(|tx| {
             let n = tx
-                .execute("DELETE FROM catalog_sites WHERE kind = 0 AND last_confirmed_ms < $1", &[&cutoff])
+                .execute(
+                    "DELETE FROM catalog_sites WHERE kind = 0 AND last_confirmed_ms < $1",
+                    &[&cutoff],
+                )
                 .map_err(db)?;
-            tx.execute("DELETE FROM catalog_seen WHERE observed_ms < $1", &[&cutoff]).map_err(db)?;
+            tx.execute(
+                "DELETE FROM catalog_seen WHERE observed_ms < $1",
+                &[&cutoff],
+            )
+            .map_err(db)?;
             Ok(n)
         })
     }
@@ -223,7 +244,8 @@ impl Store for PostgisStore {
             let mut w = PgTx { tx };
             for c in candidates {
                 if let Some(src) = &c.source_id {
-                    w.tx.execute("DELETE FROM catalog_sites WHERE source_id = $1", &[src]).map_err(db)?;
+                    w.tx.execute("DELETE FROM catalog_sites WHERE source_id = $1", &[src])
+                        .map_err(db)?;
                 }
                 w.insert(&c.to_site(now))?;
             }
@@ -243,7 +265,11 @@ impl Store for PostgisStore {
             )
             .map_err(db)?;
         let n = |i: usize| row.get::<_, i64>(i).max(0) as u64;
-        Ok(Counts { confirmed: n(0), candidates: n(1), seen_areas: n(2) })
+        Ok(Counts {
+            confirmed: n(0),
+            candidates: n(1),
+            seen_areas: n(2),
+        })
     }
 
     fn check_integrity(&self) -> Result<()> {
@@ -251,7 +277,10 @@ impl Store for PostgisStore {
         let mut guard = self.client()?;
         let client = guard.as_mut().ok_or_else(disconnected)?;
         let at: i32 = client
-            .query_one("SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version", &[])
+            .query_one(
+                "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+                &[],
+            )
             .map_err(db)?
             .get(0);
         if at != known {
@@ -388,7 +417,9 @@ impl WriteTx for PgTx<'_, '_> {
     }
 
     fn delete(&mut self, id: SiteId) -> Result<()> {
-        self.tx.execute("DELETE FROM catalog_sites WHERE id = $1", &[&id.0]).map_err(db)?;
+        self.tx
+            .execute("DELETE FROM catalog_sites WHERE id = $1", &[&id.0])
+            .map_err(db)?;
         Ok(())
     }
 
@@ -414,11 +445,17 @@ impl WriteTx for PgTx<'_, '_> {
 
 fn migrate(client: &mut Client) -> Result<()> {
     let mut tx = client.transaction().map_err(db)?;
-    tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK]).map_err(db)?;
-    tx.batch_execute("CREATE TABLE IF NOT EXISTS catalog_schema_version (version INTEGER NOT NULL)")
+    tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK])
         .map_err(db)?;
+    tx.batch_execute(
+        "CREATE TABLE IF NOT EXISTS catalog_schema_version (version INTEGER NOT NULL)",
+    )
+    .map_err(db)?;
     let at: i32 = tx
-        .query_one("SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version", &[])
+        .query_one(
+            "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+            &[],
+        )
         .map_err(db)?
         .get(0);
     let known = MIGRATIONS.len() as i32;
@@ -430,8 +467,11 @@ fn migrate(client: &mut Client) -> Result<()> {
     }
     for (i, sql) in MIGRATIONS.iter().enumerate().skip(at.max(0) as usize) {
         tx.batch_execute(sql).map_err(db)?;
-        tx.execute("INSERT INTO catalog_schema_version (version) VALUES ($1)", &[&(i as i32 + 1)])
-            .map_err(db)?;
+        tx.execute(
+            "INSERT INTO catalog_schema_version (version) VALUES ($1)",
+            &[&(i as i32 + 1)],
+        )
+        .map_err(db)?;
     }
     tx.commit().map_err(db)
 }
@@ -461,7 +501,10 @@ fn site_from_row(r: &Row) -> Result<Site> {
 }
 
 fn parse_polygon(text: &str) -> Result<Polygon> {
-    let corrupt = |what: String| Error::Corrupt { backend: BACKEND, what };
+    let corrupt = |what: String| Error::Corrupt {
+        backend: BACKEND,
+        what,
+    };
     let v: serde_json::Value =
         serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
     polygon_from_coordinates(&v["coordinates"], "polygon")
@@ -480,9 +523,15 @@ fn clamp_i64(n: u64) -> i64 {
 }
 
 fn disconnected() -> Error {
-    Error::Storage { backend: BACKEND, source: "no connection to the database".into() }
+    Error::Storage {
+        backend: BACKEND,
+        source: "no connection to the database".into(),
+    }
 }
 
 fn db(e: postgres::Error) -> Error {
-    Error::Storage { backend: BACKEND, source: Box::new(e) }
+    Error::Storage {
+        backend: BACKEND,
+        source: Box::new(e),
+    }
 }

@@ -133,7 +133,10 @@ impl Resolved {
         if !(q.radius_m.is_finite() && q.radius_m > 0.0 && q.radius_m <= MAX_SEARCH_RADIUS_M) {
             return Err(Error::invalid(
                 "radius_m",
-                format!("{} is not a radius in (0, {MAX_SEARCH_RADIUS_M}] m", q.radius_m),
+                format!(
+                    "{} is not a radius in (0, {MAX_SEARCH_RADIUS_M}] m",
+                    q.radius_m
+                ),
             ));
         }
         let page_size = match q.page_size {
@@ -141,7 +144,9 @@ impl Resolved {
                 return Err(Error::invalid("page_size", format!("{n} is negative")));
             }
             0 => DEFAULT_PAGE_SIZE,
-            n => usize::try_from(n).unwrap_or(MAX_PAGE_SIZE).min(MAX_PAGE_SIZE),
+            n => usize::try_from(n)
+                .unwrap_or(MAX_PAGE_SIZE)
+                .min(MAX_PAGE_SIZE),
         };
         if !(q.min_safe_radius_m.is_finite() && q.min_safe_radius_m >= 0.0) {
             return Err(Error::invalid(
@@ -182,7 +187,8 @@ impl Resolved {
     pub fn admits(&self, site: &Site, distance_m: f64) -> bool {
         distance_m <= self.radius_m
             && site.safe_radius_m >= self.min_safe_radius_m
-            && (site.kind == SiteKind::Candidate || self.cutoff.is_none_or(|c| site.last_confirmed >= c))
+            && (site.kind == SiteKind::Candidate
+                || self.cutoff.is_none_or(|c| site.last_confirmed >= c))
     }
 
     /// One page: confirmed sites, then candidates when asked, from the cursor on. `fetch` returns
@@ -213,18 +219,32 @@ impl Resolved {
         let more = found.len() > self.page_size;
         found.truncate(self.page_size);
         let next_page_token = match found.last() {
-            Some(&(group, key, ref f)) if more => {
-                encode_token(&self.hash, self.cutoff, Cursor { group, key, id: f.site.id.0 })
-            }
+            Some(&(group, key, ref f)) if more => encode_token(
+                &self.hash,
+                self.cutoff,
+                Cursor {
+                    group,
+                    key,
+                    id: f.site.id.0,
+                },
+            ),
             _ => String::new(),
         };
-        Ok(SearchPage { sites: found.into_iter().map(|(_, _, f)| f).collect(), next_page_token })
+        Ok(SearchPage {
+            sites: found.into_iter().map(|(_, _, f)| f).collect(),
+            next_page_token,
+        })
     }
 }
 
 /// Sorts one group's admitted results and keeps those after the keyset position (the embedded
 /// store's ordering; PostGIS orders in SQL).
-pub(crate) fn order_group(r: &Resolved, mut all: Vec<Found>, after: Option<(f64, i64)>, limit: usize) -> Vec<Found> {
+pub(crate) fn order_group(
+    r: &Resolved,
+    mut all: Vec<Found>,
+    after: Option<(f64, i64)>,
+    limit: usize,
+) -> Vec<Found> {
     let key = |f: &Found| (r.sort_key(&f.site, f.distance_m), f.site.id.0);
     all.retain(|f| {
         let (k, id) = key(f);
@@ -289,7 +309,9 @@ fn encode_token(hash: &[u8; 8], cutoff: Option<Timestamp>, c: Cursor) -> String 
 
 fn decode_token(token: &str, hash: &[u8; 8]) -> Result<(Option<Timestamp>, Cursor)> {
     let bad = |why: &str| Error::invalid("page_token", why.to_string());
-    let b = URL_SAFE_NO_PAD.decode(token).map_err(|_| bad("not a token this service issued"))?;
+    let b = URL_SAFE_NO_PAD
+        .decode(token)
+        .map_err(|_| bad("not a token this service issued"))?;
     if b.len() != TOKEN_LEN || b[0] != TOKEN_VERSION {
         return Err(bad("not a token this service issued"));
     }
@@ -307,7 +329,14 @@ fn decode_token(token: &str, hash: &[u8; 8]) -> Result<(Option<Timestamp>, Curso
     if group > 1 || key.is_nan() {
         return Err(bad("the token is damaged"));
     }
-    Ok((cutoff, Cursor { group, key, id: i64_at(27) }))
+    Ok((
+        cutoff,
+        Cursor {
+            group,
+            key,
+            id: i64_at(27),
+        },
+    ))
 }
 
 #[cfg(test)]
@@ -322,7 +351,11 @@ mod tests {
     fn tokens_round_trip_and_refuse_tampering() {
         let q = query();
         let r = Resolved::new(&q, Timestamp::from_unix_ms(1_000_000_000)).unwrap();
-        let c = Cursor { group: 0, key: 12.5, id: 42 };
+        let c = Cursor {
+            group: 0,
+            key: 12.5,
+            id: 42,
+        };
         let t = encode_token(&r.hash, r.cutoff, c);
         let mut next = q.clone();
         next.page_token = t.clone();
@@ -346,12 +379,18 @@ mod tests {
         assert!(e.to_string().contains("other parameters"), "{e}");
     }
 
+    /// A change to a query.
+    type Change = fn(&mut SearchQuery);
+
     #[test]
     fn bad_fields_are_named() {
         let now = Timestamp::from_unix_ms(0);
-        let cases: [(fn(&mut SearchQuery), &str); 6] = [
+        let cases: [(Change, &str); 6] = [
             (|q| q.center.latitude_deg = 91.0, "center.latitude_deg"),
-            (|q| q.center.longitude_deg = f64::NAN, "center.longitude_deg"),
+            (
+                |q| q.center.longitude_deg = f64::NAN,
+                "center.longitude_deg",
+            ),
             (|q| q.radius_m = 0.0, "radius_m"),
             (|q| q.page_size = -1, "page_size"),
             (|q| q.min_safe_radius_m = -1.0, "min_safe_radius_m"),

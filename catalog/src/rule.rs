@@ -40,7 +40,7 @@
 use std::collections::HashSet;
 
 use crate::geo::{Polygon, distance_m};
-use crate::model::{ObservedSite, Observation, Site, SiteId, SiteKind};
+use crate::model::{Observation, ObservedSite, Site, SiteId, SiteKind};
 use crate::time::Timestamp;
 
 /// The largest plane-height difference between two sites of one roof, metres.
@@ -98,10 +98,22 @@ pub struct Plan {
 /// newer observations resolved there (`newer_seen`: each with its time; older ones are ignored).
 pub fn plan(obs: &Observation, stored: &[Site], newer_seen: &[(Timestamp, Polygon)]) -> Plan {
     let t = obs.t;
-    let confirmed: Vec<&Site> = stored.iter().filter(|s| s.kind == SiteKind::Confirmed).collect();
-    let newer_areas: Vec<&Polygon> =
-        newer_seen.iter().filter(|(at, _)| *at > t).map(|(_, p)| p).collect();
-    let mut out = Plan { report: ApplyReport { observations: 1, ..Default::default() }, ..Default::default() };
+    let confirmed: Vec<&Site> = stored
+        .iter()
+        .filter(|s| s.kind == SiteKind::Confirmed)
+        .collect();
+    let newer_areas: Vec<&Polygon> = newer_seen
+        .iter()
+        .filter(|(at, _)| *at > t)
+        .map(|(_, p)| p)
+        .collect();
+    let mut out = Plan {
+        report: ApplyReport {
+            observations: 1,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
 
     // Largest circles first: they take the stored site they overlap before smaller pieces do.
     let mut order: Vec<&ObservedSite> = obs.sites.iter().collect();
@@ -110,8 +122,12 @@ pub fn plan(obs: &Observation, stored: &[Site], newer_seen: &[(Timestamp, Polygo
     let mut taken: HashSet<SiteId> = HashSet::new();
     let mut merged: HashSet<SiteId> = HashSet::new();
     for new in order {
-        let stale = newer_areas.iter().any(|p| p.meets_circle(new.center, new.safe_radius_m))
-            || confirmed.iter().any(|s| s.last_confirmed > t && same_roof(s, new));
+        let stale = newer_areas
+            .iter()
+            .any(|p| p.meets_circle(new.center, new.safe_radius_m))
+            || confirmed
+                .iter()
+                .any(|s| s.last_confirmed > t && same_roof(s, new));
         if stale {
             out.report.dropped_stale += 1;
             continue;
@@ -148,7 +164,11 @@ pub fn plan(obs: &Observation, stored: &[Site], newer_seen: &[(Timestamp, Polygo
         if merged.contains(&s.id) {
             out.deletes.push(s.id);
             out.report.merged += 1;
-        } else if obs.seen.iter().any(|p| p.meets_circle(s.center, s.safe_radius_m)) {
+        } else if obs
+            .seen
+            .iter()
+            .any(|p| p.meets_circle(s.center, s.safe_radius_m))
+        {
             out.deletes.push(s.id);
             out.report.withdrawn += 1;
         }
@@ -170,7 +190,8 @@ fn site_from(obs: &Observation, new: &ObservedSite, stored: Option<&Site>) -> Si
         last_confirmed: obs.t,
         frames: stored.map_or(frames, |s| s.frames.saturating_add(frames)),
         approaches: stored.map_or(1, |s| {
-            s.approaches.saturating_add(u64::from(s.approach_id != obs.approach_id))
+            s.approaches
+                .saturating_add(u64::from(s.approach_id != obs.approach_id))
         }),
         drone_id: obs.drone_id.clone(),
         approach_id: obs.approach_id.clone(),

@@ -98,18 +98,26 @@ impl SqliteStore {
     fn with_connection(mut conn: Connection) -> Result<Self> {
         conn.busy_timeout(BUSY_TIMEOUT).map_err(db)?;
         // In memory the journal stays "memory"; on disk it becomes "wal".
-        let _mode: String =
-            conn.query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0)).map_err(db)?;
-        conn.execute_batch("PRAGMA synchronous = NORMAL;").map_err(db)?;
+        let _mode: String = conn
+            .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))
+            .map_err(db)?;
+        conn.execute_batch("PRAGMA synchronous = NORMAL;")
+            .map_err(db)?;
         migrate(&mut conn)?;
-        Ok(SqliteStore { conn: Mutex::new(conn) })
+        Ok(SqliteStore {
+            conn: Mutex::new(conn),
+        })
     }
 
     /// The schema version the file is at.
     pub fn schema_version(&self) -> Result<u32> {
         let conn = self.lock();
-        conn.query_row("SELECT COALESCE(MAX(version), 0) FROM schema_version", [], |r| r.get(0))
-            .map_err(db)
+        conn.query_row(
+            "SELECT COALESCE(MAX(version), 0) FROM schema_version",
+            [],
+            |r| r.get(0),
+        )
+        .map_err(db)
     }
 
     fn lock(&self) -> MutexGuard<'_, Connection> {
@@ -126,7 +134,9 @@ impl Store for SqliteStore {
     fn apply(&self, batch: &[Observation]) -> Result<ApplyReport> {
         let sorted = validate(batch)?;
         let mut conn = self.lock();
-        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(db)?;
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
         let report = apply_sorted(&mut SqliteTx { tx: &tx }, &sorted)?;
         tx.commit().map_err(db)?;
         Ok(report)
@@ -179,7 +189,9 @@ impl Store for SqliteStore {
     fn expire(&self, now: Timestamp, retention: Duration) -> Result<u64> {
         let cutoff = now.saturating_sub(retention).unix_ms();
         let mut conn = self.lock();
-        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(db)?;
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
         tx.execute(
             "DELETE FROM sites_rtree WHERE id IN \
              (SELECT id FROM sites WHERE kind = 0 AND last_confirmed_ms < ?1)",
@@ -187,14 +199,18 @@ impl Store for SqliteStore {
         )
         .map_err(db)?;
         let n = tx
-            .execute("DELETE FROM sites WHERE kind = 0 AND last_confirmed_ms < ?1", [cutoff])
+            .execute(
+                "DELETE FROM sites WHERE kind = 0 AND last_confirmed_ms < ?1",
+                [cutoff],
+            )
             .map_err(db)?;
         tx.execute(
             "DELETE FROM seen_rtree WHERE id IN (SELECT id FROM seen WHERE observed_ms < ?1)",
             [cutoff],
         )
         .map_err(db)?;
-        tx.execute("DELETE FROM seen WHERE observed_ms < ?1", [cutoff]).map_err(db)?;
+        tx.execute("DELETE FROM seen WHERE observed_ms < ?1", [cutoff])
+            .map_err(db)?;
         tx.commit().map_err(db)?;
         Ok(n as u64)
     }
@@ -204,12 +220,16 @@ impl Store for SqliteStore {
             c.validate(&format!("candidates[{i}]"))?;
         }
         let mut conn = self.lock();
-        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(db)?;
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
         let mut w = SqliteTx { tx: &tx };
         for c in candidates {
             if let Some(src) = &c.source_id {
                 let old: Option<i64> = tx
-                    .query_row("SELECT id FROM sites WHERE source_id = ?1", [src], |r| r.get(0))
+                    .query_row("SELECT id FROM sites WHERE source_id = ?1", [src], |r| {
+                        r.get(0)
+                    })
                     .optional()
                     .map_err(db)?;
                 if let Some(old) = old {
@@ -225,7 +245,9 @@ impl Store for SqliteStore {
     fn counts(&self) -> Result<Counts> {
         let conn = self.lock();
         let count = |sql: &str| -> Result<u64> {
-            conn.query_row(sql, [], |r| r.get::<_, i64>(0)).map(|n| n as u64).map_err(db)
+            conn.query_row(sql, [], |r| r.get::<_, i64>(0))
+                .map(|n| n as u64)
+                .map_err(db)
         };
         Ok(Counts {
             confirmed: count("SELECT COUNT(*) FROM sites WHERE kind = 0")?,
@@ -237,17 +259,26 @@ impl Store for SqliteStore {
     fn check_integrity(&self) -> Result<()> {
         let conn = self.lock();
         let mut stmt = conn.prepare("PRAGMA integrity_check").map_err(db)?;
-        let lines: Vec<String> =
-            stmt.query_map([], |r| r.get(0)).map_err(db)?.collect::<Result<_, _>>().map_err(db)?;
+        let lines: Vec<String> = stmt
+            .query_map([], |r| r.get(0))
+            .map_err(db)?
+            .collect::<Result<_, _>>()
+            .map_err(db)?;
         if lines != ["ok"] {
-            return Err(Error::Corrupt { backend: BACKEND, what: lines.join("; ") });
+            return Err(Error::Corrupt {
+                backend: BACKEND,
+                what: lines.join("; "),
+            });
         }
         for table in ["sites_rtree", "seen_rtree"] {
             let verdict: String = conn
                 .query_row(&format!("SELECT rtreecheck('{table}')"), [], |r| r.get(0))
                 .map_err(db)?;
             if verdict != "ok" {
-                return Err(Error::Corrupt { backend: BACKEND, what: format!("{table}: {verdict}") });
+                return Err(Error::Corrupt {
+                    backend: BACKEND,
+                    what: format!("{table}: {verdict}"),
+                });
             }
         }
         for (table, index) in [("sites", "sites_rtree"), ("seen", "seen_rtree")] {
@@ -286,7 +317,10 @@ impl WriteTx for SqliteTx<'_> {
             ))
             .map_err(db)?;
         let rows = stmt
-            .query_map(params![b.min_lat, b.max_lat, b.min_lon, b.max_lon], site_from_row)
+            .query_map(
+                params![b.min_lat, b.max_lat, b.min_lon, b.max_lon],
+                site_from_row,
+            )
             .map_err(db)?;
         rows.map(|r| r.map_err(db)?).collect()
     }
@@ -301,9 +335,10 @@ impl WriteTx for SqliteTx<'_> {
             )
             .map_err(db)?;
         let rows = stmt
-            .query_map(params![b.min_lat, b.max_lat, b.min_lon, b.max_lon, t.unix_ms()], |r| {
-                Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?))
-            })
+            .query_map(
+                params![b.min_lat, b.max_lat, b.min_lon, b.max_lon, t.unix_ms()],
+                |r| Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?)),
+            )
             .map_err(db)?;
         let mut out = Vec::new();
         for row in rows {
@@ -371,13 +406,25 @@ impl WriteTx for SqliteTx<'_> {
                 s.model_id,
             ])
             .map_err(db)?;
-        self.tx.prepare_cached("DELETE FROM sites_rtree WHERE id = ?1").map_err(db)?.execute([s.id.0]).map_err(db)?;
+        self.tx
+            .prepare_cached("DELETE FROM sites_rtree WHERE id = ?1")
+            .map_err(db)?
+            .execute([s.id.0])
+            .map_err(db)?;
         self.index("sites_rtree", s.id.0, &s.bbox())
     }
 
     fn delete(&mut self, id: SiteId) -> Result<()> {
-        self.tx.prepare_cached("DELETE FROM sites WHERE id = ?1").map_err(db)?.execute([id.0]).map_err(db)?;
-        self.tx.prepare_cached("DELETE FROM sites_rtree WHERE id = ?1").map_err(db)?.execute([id.0]).map_err(db)?;
+        self.tx
+            .prepare_cached("DELETE FROM sites WHERE id = ?1")
+            .map_err(db)?
+            .execute([id.0])
+            .map_err(db)?;
+        self.tx
+            .prepare_cached("DELETE FROM sites_rtree WHERE id = ?1")
+            .map_err(db)?
+            .execute([id.0])
+            .map_err(db)?;
         Ok(())
     }
 
@@ -385,7 +432,10 @@ impl WriteTx for SqliteTx<'_> {
         self.tx
             .prepare_cached("INSERT INTO seen (observed_ms, polygon) VALUES (?1, ?2)")
             .map_err(db)?
-            .execute(params![t.unix_ms(), polygon_geometry(area, false).to_string()])
+            .execute(params![
+                t.unix_ms(),
+                polygon_geometry(area, false).to_string()
+            ])
             .map_err(db)?;
         let id = self.tx.last_insert_rowid();
         self.index("seen_rtree", id, &area.bbox())
@@ -406,11 +456,17 @@ impl SqliteTx<'_> {
 }
 
 fn migrate(conn: &mut Connection) -> Result<()> {
-    let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(db)?;
+    let tx = conn
+        .transaction_with_behavior(TransactionBehavior::Immediate)
+        .map_err(db)?;
     tx.execute_batch("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)")
         .map_err(db)?;
     let at: i64 = tx
-        .query_row("SELECT COALESCE(MAX(version), 0) FROM schema_version", [], |r| r.get(0))
+        .query_row(
+            "SELECT COALESCE(MAX(version), 0) FROM schema_version",
+            [],
+            |r| r.get(0),
+        )
         .map_err(db)?;
     let known = MIGRATIONS.len() as i64;
     if at > known {
@@ -421,7 +477,11 @@ fn migrate(conn: &mut Connection) -> Result<()> {
     }
     for (i, sql) in MIGRATIONS.iter().enumerate().skip(at as usize) {
         tx.execute_batch(sql).map_err(db)?;
-        tx.execute("INSERT INTO schema_version (version) VALUES (?1)", [i as i64 + 1]).map_err(db)?;
+        tx.execute(
+            "INSERT INTO schema_version (version) VALUES (?1)",
+            [i as i64 + 1],
+        )
+        .map_err(db)?;
     }
     tx.commit().map_err(db)
 }
@@ -456,7 +516,10 @@ fn site_from_row(r: &Row<'_>) -> rusqlite::Result<Result<Site>> {
 }
 
 fn parse_polygon(text: &str) -> Result<Polygon> {
-    let corrupt = |what: String| Error::Corrupt { backend: BACKEND, what };
+    let corrupt = |what: String| Error::Corrupt {
+        backend: BACKEND,
+        what,
+    };
     let v: serde_json::Value =
         serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
     polygon_from_coordinates(&v["coordinates"], "polygon")
@@ -475,5 +538,8 @@ fn clamp_i64(n: u64) -> i64 {
 }
 
 fn db(e: rusqlite::Error) -> Error {
-    Error::Storage { backend: BACKEND, source: Box::new(e) }
+    Error::Storage {
+        backend: BACKEND,
+        source: Box::new(e),
+    }
 }

@@ -90,13 +90,22 @@ mod tests {
 
     #[test]
     fn rfc3339_of_known_instants() {
-        assert_eq!(Timestamp::from_unix_ms(0).to_rfc3339(), "1970-01-01T00:00:00.000Z");
+        assert_eq!(
+            Timestamp::from_unix_ms(0).to_rfc3339(),
+            "1970-01-01T00:00:00.000Z"
+        );
         assert_eq!(
             Timestamp::from_unix_ms(1_796_588_100_250).to_rfc3339(),
             "2026-12-06T20:15:00.250Z"
         );
-        assert_eq!(Timestamp::from_unix_ms(-1).to_rfc3339(), "1969-12-31T23:59:59.999Z");
-        assert_eq!(Timestamp::from_unix_ms(951_782_400_000).to_rfc3339(), "2000-02-29T00:00:00.000Z");
+        assert_eq!(
+            Timestamp::from_unix_ms(-1).to_rfc3339(),
+            "1969-12-31T23:59:59.999Z"
+        );
+        assert_eq!(
+            Timestamp::from_unix_ms(951_782_400_000).to_rfc3339(),
+            "2000-02-29T00:00:00.000Z"
+        );
     }
 
     #[test]

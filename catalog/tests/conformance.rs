@@ -25,7 +25,9 @@ struct Sqlite {
 
 impl Sqlite {
     fn new() -> Self {
-        Sqlite { dir: tempfile::tempdir().expect("a temp dir") }
+        Sqlite {
+            dir: tempfile::tempdir().expect("a temp dir"),
+        }
     }
 }
 
@@ -43,7 +45,10 @@ struct Postgis {
 impl Postgis {
     fn new() -> Self {
         let server = pg::shared();
-        Postgis { url: server.create_database(), _server: server }
+        Postgis {
+            url: server.create_database(),
+            _server: server,
+        }
     }
 }
 
@@ -83,7 +88,12 @@ mod scene {
         }
     }
 
-    pub fn obs(s: i64, approach: &str, seen: Vec<Polygon>, sites: Vec<ObservedSite>) -> Observation {
+    pub fn obs(
+        s: i64,
+        approach: &str,
+        seen: Vec<Polygon>,
+        sites: Vec<ObservedSite>,
+    ) -> Observation {
         Observation {
             t: t(s),
             drone_id: format!("drone-{approach}"),
@@ -106,7 +116,9 @@ mod scene {
     }
 
     pub fn field_of(e: Error) -> String {
-        e.field().unwrap_or_else(|| panic!("not a field error: {e}")).to_string()
+        e.field()
+            .unwrap_or_else(|| panic!("not a field error: {e}"))
+            .to_string()
     }
 }
 
@@ -116,48 +128,102 @@ mod suite {
 
     pub fn insert_and_search(b: &dyn Backend) {
         let store = b.open();
-        let sites = vec![site(0.0, 0.0, 5.0, 50.0), site(100.0, 0.0, 3.0, 30.0), site(0.0, 900.0, 4.0, 20.0)];
-        let seen = vec![square(0.0, 0.0, 20.0), square(100.0, 0.0, 20.0), square(0.0, 900.0, 20.0)];
+        let sites = vec![
+            site(0.0, 0.0, 5.0, 50.0),
+            site(100.0, 0.0, 3.0, 30.0),
+            site(0.0, 900.0, 4.0, 20.0),
+        ];
+        let seen = vec![
+            square(0.0, 0.0, 20.0),
+            square(100.0, 0.0, 20.0),
+            square(0.0, 900.0, 20.0),
+        ];
         let r = store.apply(&[obs(10, "a1", seen, sites.clone())]).unwrap();
-        assert_eq!((r.observations, r.inserted, r.updated, r.withdrawn), (1, 3, 0, 0));
+        assert_eq!(
+            (r.observations, r.inserted, r.updated, r.withdrawn),
+            (1, 3, 0, 0)
+        );
 
         let mut q = SearchQuery::new(at(20.0, 0.0), 500.0);
         let page = store.search(&q, t(20)).unwrap();
         assert!(page.next_page_token.is_empty());
         let d: Vec<f64> = page.sites.iter().map(|f| f.distance_m).collect();
         assert_eq!(d.len(), 2, "the roof 900 m away is outside 500 m: {d:?}");
-        assert!((d[0] - 20.0).abs() < 0.01 && (d[1] - 80.0).abs() < 0.01, "nearest first: {d:?}");
+        assert!(
+            (d[0] - 20.0).abs() < 0.01 && (d[1] - 80.0).abs() < 0.01,
+            "nearest first: {d:?}"
+        );
 
         let s = &page.sites[0].site;
         assert_eq!(s.kind, SiteKind::Confirmed);
         assert_eq!((s.first_seen, s.last_confirmed), (t(10), t(10)));
         assert_eq!((s.frames, s.approaches), (1, 1));
-        assert_eq!((s.drone_id.as_str(), s.approach_id.as_str(), s.model_id.as_str()), ("drone-a1", "a1", "model-a"));
+        assert_eq!(
+            (
+                s.drone_id.as_str(),
+                s.approach_id.as_str(),
+                s.model_id.as_str()
+            ),
+            ("drone-a1", "a1", "model-a")
+        );
         assert_eq!((s.safe_radius_m, s.plane_height_m), (5.0, 50.0));
         assert!((s.area_m2 - 144.0).abs() < 0.01, "{}", s.area_m2);
         assert!((s.center.latitude_deg - sites[0].center.latitude_deg).abs() < 1e-12);
         assert!((s.center.longitude_deg - sites[0].center.longitude_deg).abs() < 1e-12);
         assert_eq!(s.polygon.exterior.len(), 4);
         for (a, e) in s.polygon.exterior.iter().zip(&sites[0].polygon.exterior) {
-            assert!((a.latitude_deg - e.latitude_deg).abs() < 1e-12 && (a.longitude_deg - e.longitude_deg).abs() < 1e-12);
+            assert!(
+                (a.latitude_deg - e.latitude_deg).abs() < 1e-12
+                    && (a.longitude_deg - e.longitude_deg).abs() < 1e-12
+            );
         }
 
         q.radius_m = 1000.0;
         assert_eq!(store.search(&q, t(20)).unwrap().sites.len(), 3);
         let counts = store.counts().unwrap();
-        assert_eq!((counts.confirmed, counts.candidates, counts.seen_areas), (3, 0, 3));
+        assert_eq!(
+            (counts.confirmed, counts.candidates, counts.seen_areas),
+            (3, 0, 3)
+        );
         store.check_integrity().unwrap();
     }
 
     pub fn orders_and_filters(b: &dyn Backend) {
         let store = b.open();
         // Three roofs seen at different times, with different radii.
-        store.apply(&[obs(10, "a", vec![square(0.0, 0.0, 10.0)], vec![site(0.0, 0.0, 2.0, 10.0)])]).unwrap();
-        store.apply(&[obs(20, "b", vec![square(50.0, 0.0, 10.0)], vec![site(50.0, 0.0, 6.0, 10.0)])]).unwrap();
-        store.apply(&[obs(30, "c", vec![square(100.0, 0.0, 10.0)], vec![site(100.0, 0.0, 4.0, 10.0)])]).unwrap();
+        store
+            .apply(&[obs(
+                10,
+                "a",
+                vec![square(0.0, 0.0, 10.0)],
+                vec![site(0.0, 0.0, 2.0, 10.0)],
+            )])
+            .unwrap();
+        store
+            .apply(&[obs(
+                20,
+                "b",
+                vec![square(50.0, 0.0, 10.0)],
+                vec![site(50.0, 0.0, 6.0, 10.0)],
+            )])
+            .unwrap();
+        store
+            .apply(&[obs(
+                30,
+                "c",
+                vec![square(100.0, 0.0, 10.0)],
+                vec![site(100.0, 0.0, 4.0, 10.0)],
+            )])
+            .unwrap();
         let xs = |q: &SearchQuery, now: Timestamp| -> Vec<i64> {
             let f = LocalFrame::new(ORIGIN);
-            store.search(q, now).unwrap().sites.iter().map(|s| f.to_xy(s.site.center).0.round() as i64).collect()
+            store
+                .search(q, now)
+                .unwrap()
+                .sites
+                .iter()
+                .map(|s| f.to_xy(s.site.center).0.round() as i64)
+                .collect()
         };
         let mut q = SearchQuery::new(at(-10.0, 0.0), 500.0);
         assert_eq!(xs(&q, t(40)), [0, 50, 100]);
@@ -192,7 +258,13 @@ mod suite {
             let mut q = SearchQuery::new(ORIGIN, 1000.0);
             q.order = order;
             q.page_size = 100;
-            let all: Vec<i64> = store.search(&q, t(20)).unwrap().sites.iter().map(|f| f.site.id.0).collect();
+            let all: Vec<i64> = store
+                .search(&q, t(20))
+                .unwrap()
+                .sites
+                .iter()
+                .map(|f| f.site.id.0)
+                .collect();
             assert_eq!(all.len(), 25);
             q.page_size = 10;
             let mut paged = Vec::new();
@@ -207,23 +279,35 @@ mod suite {
                 q.page_token = page.next_page_token;
             }
             assert_eq!(sizes, [10, 10, 5], "{order:?}");
-            assert_eq!(paged, all, "{order:?}: pages concatenate to the whole answer");
+            assert_eq!(
+                paged, all,
+                "{order:?}: pages concatenate to the whole answer"
+            );
         }
         // A write between pages neither repeats nor skips what was not changed.
         let mut q = SearchQuery::new(ORIGIN, 1000.0);
         q.page_size = 10;
         let first = store.search(&q, t(20)).unwrap();
-        store.apply(&[obs(30, "b", vec![], vec![site(1.0, 1.0, 1.0, 80.0)])]).unwrap();
+        store
+            .apply(&[obs(30, "b", vec![], vec![site(1.0, 1.0, 1.0, 80.0)])])
+            .unwrap();
         q.page_token = first.next_page_token;
         let second = store.search(&q, t(30)).unwrap();
-        let ids: std::collections::HashSet<i64> = first.sites.iter().chain(&second.sites).map(|f| f.site.id.0).collect();
+        let ids: std::collections::HashSet<i64> = first
+            .sites
+            .iter()
+            .chain(&second.sites)
+            .map(|f| f.site.id.0)
+            .collect();
         assert_eq!(ids.len(), 20, "no result twice");
         assert!(second.sites[0].distance_m >= first.sites[9].distance_m);
     }
 
     pub fn page_tokens_are_checked(b: &dyn Backend) {
         let store = b.open();
-        let sites: Vec<ObservedSite> = (0..5).map(|i| site(f64::from(i) * 20.0, 0.0, 2.0, 10.0)).collect();
+        let sites: Vec<ObservedSite> = (0..5)
+            .map(|i| site(f64::from(i) * 20.0, 0.0, 2.0, 10.0))
+            .collect();
         store.apply(&[obs(10, "a", vec![], sites)]).unwrap();
         let mut q = SearchQuery::new(ORIGIN, 500.0);
         q.page_size = 2;
@@ -232,10 +316,17 @@ mod suite {
         // Tampered: one character changed, cut short, or not base64 at all.
         let mut tampered = token.clone().into_bytes();
         tampered[10] = if tampered[10] == b'A' { b'B' } else { b'A' };
-        for bad in [String::from_utf8(tampered).unwrap(), token[..token.len() - 3].to_string(), "not a token!".into()] {
+        for bad in [
+            String::from_utf8(tampered).unwrap(),
+            token[..token.len() - 3].to_string(),
+            "not a token!".into(),
+        ] {
             let mut q2 = q.clone();
             q2.page_token = bad;
-            assert_eq!(field_of(store.search(&q2, t(20)).unwrap_err()), "page_token");
+            assert_eq!(
+                field_of(store.search(&q2, t(20)).unwrap_err()),
+                "page_token"
+            );
         }
         // Another search's parameters.
         for change in [
@@ -249,7 +340,10 @@ mod suite {
             let mut q2 = q.clone();
             q2.page_token = token.clone();
             change(&mut q2);
-            assert_eq!(field_of(store.search(&q2, t(20)).unwrap_err()), "page_token");
+            assert_eq!(
+                field_of(store.search(&q2, t(20)).unwrap_err()),
+                "page_token"
+            );
         }
         // The page size may change between pages.
         let mut q2 = q.clone();
@@ -258,9 +352,12 @@ mod suite {
         assert_eq!(store.search(&q2, t(20)).unwrap().sites.len(), 3);
     }
 
+    /// A change to a query.
+    type Change = fn(&mut SearchQuery);
+
     pub fn bad_fields_are_named(b: &dyn Backend) {
         let store = b.open();
-        let cases: [(fn(&mut SearchQuery), &str); 7] = [
+        let cases: [(Change, &str); 7] = [
             (|q| q.center.latitude_deg = 90.5, "center.latitude_deg"),
             (|q| q.center.latitude_deg = f64::NAN, "center.latitude_deg"),
             (|q| q.center.longitude_deg = -181.0, "center.longitude_deg"),
@@ -284,38 +381,76 @@ mod suite {
 
     pub fn a_bad_batch_writes_nothing(b: &dyn Backend) {
         let store = b.open();
-        let good = obs(10, "a", vec![square(0.0, 0.0, 10.0)], vec![site(0.0, 0.0, 3.0, 10.0)]);
-        let mut bad = obs(11, "a", vec![], vec![site(50.0, 0.0, 3.0, 10.0), site(90.0, 0.0, 3.0, 10.0)]);
+        let good = obs(
+            10,
+            "a",
+            vec![square(0.0, 0.0, 10.0)],
+            vec![site(0.0, 0.0, 3.0, 10.0)],
+        );
+        let mut bad = obs(
+            11,
+            "a",
+            vec![],
+            vec![site(50.0, 0.0, 3.0, 10.0), site(90.0, 0.0, 3.0, 10.0)],
+        );
         bad.sites[1].safe_radius_m = f64::NAN;
         let e = store.apply(&[good.clone(), bad.clone()]).unwrap_err();
         assert_eq!(field_of(e), "observations[1].sites[1].safe_radius_m");
         bad.sites[1].safe_radius_m = 3.0;
         bad.sites[0].center.longitude_deg = 200.0;
-        assert_eq!(field_of(store.apply(&[good, bad]).unwrap_err()), "observations[1].sites[0].center.longitude_deg");
+        assert_eq!(
+            field_of(store.apply(&[good, bad]).unwrap_err()),
+            "observations[1].sites[0].center.longitude_deg"
+        );
         let mut no_frames = obs(12, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)]);
         no_frames.sites[0].frames = 0;
-        assert_eq!(field_of(store.apply(&[no_frames]).unwrap_err()), "observations[0].sites[0].frames");
-        assert!(everything(&*store).is_empty(), "nothing of a refused batch is written");
+        assert_eq!(
+            field_of(store.apply(&[no_frames]).unwrap_err()),
+            "observations[0].sites[0].frames"
+        );
+        assert!(
+            everything(&*store).is_empty(),
+            "nothing of a refused batch is written"
+        );
     }
 
     pub fn same_roof_is_updated(b: &dyn Backend) {
         let store = b.open();
         let roof = square(0.0, 0.0, 15.0);
-        store.apply(&[obs(10, "a", vec![roof.clone()], vec![site(0.0, 0.0, 5.0, 30.0)])]).unwrap();
+        store
+            .apply(&[obs(
+                10,
+                "a",
+                vec![roof.clone()],
+                vec![site(0.0, 0.0, 5.0, 30.0)],
+            )])
+            .unwrap();
         // The same approach again: frames counted, approaches not.
         let mut again = site(0.5, 0.0, 5.0, 30.1);
         again.frames = 4;
-        let r = store.apply(&[obs(20, "a", vec![roof.clone()], vec![again])]).unwrap();
+        let r = store
+            .apply(&[obs(20, "a", vec![roof.clone()], vec![again])])
+            .unwrap();
         assert_eq!((r.updated, r.inserted, r.withdrawn), (1, 0, 0));
         // Another approach sees the circle moved 3 m and smaller, 0.4 m higher: the same roof.
-        let r = store.apply(&[obs(30, "b", vec![roof], vec![site(3.0, 0.0, 4.0, 30.4)])]).unwrap();
+        let r = store
+            .apply(&[obs(30, "b", vec![roof], vec![site(3.0, 0.0, 4.0, 30.4)])])
+            .unwrap();
         assert_eq!((r.updated, r.inserted, r.withdrawn), (1, 0, 0));
         let all = everything(&*store);
         assert_eq!(all.len(), 1);
         let s = &all[0].site;
-        assert_eq!((s.first_seen, s.last_confirmed), (t(10), t(30)), "first seen kept");
+        assert_eq!(
+            (s.first_seen, s.last_confirmed),
+            (t(10), t(30)),
+            "first seen kept"
+        );
         assert_eq!((s.frames, s.approaches), (6, 2));
-        assert_eq!((s.safe_radius_m, s.plane_height_m), (4.0, 30.4), "the newest geometry");
+        assert_eq!(
+            (s.safe_radius_m, s.plane_height_m),
+            (4.0, 30.4),
+            "the newest geometry"
+        );
         assert!((LocalFrame::new(ORIGIN).to_xy(s.center).0 - 3.0).abs() < 1e-6);
         assert_eq!(s.approach_id, "b");
     }
@@ -323,31 +458,70 @@ mod suite {
     pub fn unseen_sites_keep_their_age(b: &dyn Backend) {
         let store = b.open();
         store
-            .apply(&[obs(10, "a", vec![square(0.0, 0.0, 60.0)], vec![site(0.0, 0.0, 3.0, 10.0), site(40.0, 0.0, 3.0, 10.0)])])
+            .apply(&[obs(
+                10,
+                "a",
+                vec![square(0.0, 0.0, 60.0)],
+                vec![site(0.0, 0.0, 3.0, 10.0), site(40.0, 0.0, 3.0, 10.0)],
+            )])
             .unwrap();
         // A later look resolves only the east part (x in 30..50): the west site is not in it.
-        let r = store.apply(&[obs(20, "b", vec![square(40.0, 0.0, 10.0)], vec![site(40.0, 0.0, 3.0, 10.0)])]).unwrap();
+        let r = store
+            .apply(&[obs(
+                20,
+                "b",
+                vec![square(40.0, 0.0, 10.0)],
+                vec![site(40.0, 0.0, 3.0, 10.0)],
+            )])
+            .unwrap();
         assert_eq!((r.updated, r.withdrawn), (1, 0));
         let all = everything(&*store);
-        let by_x = |x: f64| all.iter().find(|f| (LocalFrame::new(ORIGIN).to_xy(f.site.center).0 - x).abs() < 1.0).unwrap();
-        assert_eq!(by_x(0.0).site.last_confirmed, t(10), "outside the look: untouched");
+        let by_x = |x: f64| {
+            all.iter()
+                .find(|f| (LocalFrame::new(ORIGIN).to_xy(f.site.center).0 - x).abs() < 1.0)
+                .unwrap()
+        };
+        assert_eq!(
+            by_x(0.0).site.last_confirmed,
+            t(10),
+            "outside the look: untouched"
+        );
         assert_eq!(by_x(40.0).site.last_confirmed, t(20));
     }
 
     pub fn blocked_sites_are_withdrawn(b: &dyn Backend) {
         let store = b.open();
-        let sites = vec![site(0.0, 0.0, 4.0, 10.0), site(30.0, 0.0, 4.0, 10.0), site(60.0, 0.0, 4.0, 10.0), site(90.0, 0.0, 4.0, 10.0)];
-        store.apply(&[obs(10, "a", vec![square(45.0, 0.0, 60.0)], sites)]).unwrap();
+        let sites = vec![
+            site(0.0, 0.0, 4.0, 10.0),
+            site(30.0, 0.0, 4.0, 10.0),
+            site(60.0, 0.0, 4.0, 10.0),
+            site(90.0, 0.0, 4.0, 10.0),
+        ];
+        store
+            .apply(&[obs(10, "a", vec![square(45.0, 0.0, 60.0)], sites)])
+            .unwrap();
         // The next look: x=0 seen, no site (a tarp); x=30 seen only at the circle's rim (x >= 33.5:
         // when in doubt, withdraw); x=60 found again 0.6 m higher (another plane: not the same roof);
         // x=90 not seen.
-        let seen = vec![square(0.0, 0.0, 10.0), Polygon::rectangle(at(33.5, -10.0), at(50.0, 10.0)), square(60.0, 0.0, 10.0)];
-        let r = store.apply(&[obs(20, "b", seen, vec![site(60.0, 0.0, 4.0, 10.6)])]).unwrap();
+        let seen = vec![
+            square(0.0, 0.0, 10.0),
+            Polygon::rectangle(at(33.5, -10.0), at(50.0, 10.0)),
+            square(60.0, 0.0, 10.0),
+        ];
+        let r = store
+            .apply(&[obs(20, "b", seen, vec![site(60.0, 0.0, 4.0, 10.6)])])
+            .unwrap();
         assert_eq!((r.withdrawn, r.inserted, r.updated), (3, 1, 0));
         let f = LocalFrame::new(ORIGIN);
         let mut left: Vec<(i64, Timestamp, f64)> = everything(&*store)
             .iter()
-            .map(|x| (f.to_xy(x.site.center).0.round() as i64, x.site.last_confirmed, x.site.plane_height_m))
+            .map(|x| {
+                (
+                    f.to_xy(x.site.center).0.round() as i64,
+                    x.site.last_confirmed,
+                    x.site.plane_height_m,
+                )
+            })
             .collect();
         left.sort_by_key(|l| l.0);
         assert_eq!(left, [(60, t(20), 10.6), (90, t(10), 10.0)]);
@@ -356,22 +530,55 @@ mod suite {
     pub fn older_observations_never_overwrite(b: &dyn Backend) {
         let store = b.open();
         let roof = square(0.0, 0.0, 15.0);
-        store.apply(&[obs(10, "a", vec![roof.clone()], vec![site(0.0, 0.0, 5.0, 10.0)])]).unwrap();
-        store.apply(&[obs(30, "b", vec![roof.clone()], vec![])]).unwrap(); // withdrawn at t=30
+        store
+            .apply(&[obs(
+                10,
+                "a",
+                vec![roof.clone()],
+                vec![site(0.0, 0.0, 5.0, 10.0)],
+            )])
+            .unwrap();
+        store
+            .apply(&[obs(30, "b", vec![roof.clone()], vec![])])
+            .unwrap(); // withdrawn at t=30
         // A late observation from t=20 still reports the site: the newer look stands.
-        let r = store.apply(&[obs(20, "c", vec![roof.clone()], vec![site(0.0, 0.0, 5.0, 10.0)])]).unwrap();
+        let r = store
+            .apply(&[obs(
+                20,
+                "c",
+                vec![roof.clone()],
+                vec![site(0.0, 0.0, 5.0, 10.0)],
+            )])
+            .unwrap();
         assert_eq!((r.inserted, r.dropped_stale), (0, 1));
         assert!(everything(&*store).is_empty());
         // A roof confirmed at t=50; a late look from t=40 that saw it blocked withdraws nothing.
-        store.apply(&[obs(50, "d", vec![square(100.0, 0.0, 15.0)], vec![site(100.0, 0.0, 5.0, 10.0)])]).unwrap();
-        let r = store.apply(&[obs(40, "e", vec![square(100.0, 0.0, 15.0)], vec![])]).unwrap();
+        store
+            .apply(&[obs(
+                50,
+                "d",
+                vec![square(100.0, 0.0, 15.0)],
+                vec![site(100.0, 0.0, 5.0, 10.0)],
+            )])
+            .unwrap();
+        let r = store
+            .apply(&[obs(40, "e", vec![square(100.0, 0.0, 15.0)], vec![])])
+            .unwrap();
         assert_eq!(r.withdrawn, 0);
         let all = everything(&*store);
         assert_eq!(all.len(), 1);
         assert_eq!(all[0].site.last_confirmed, t(50));
         // One batch out of order is applied in time order: the newer withdrawal wins.
         let r = store
-            .apply(&[obs(70, "f", vec![square(200.0, 0.0, 15.0)], vec![]), obs(60, "g", vec![square(200.0, 0.0, 15.0)], vec![site(200.0, 0.0, 5.0, 10.0)])])
+            .apply(&[
+                obs(70, "f", vec![square(200.0, 0.0, 15.0)], vec![]),
+                obs(
+                    60,
+                    "g",
+                    vec![square(200.0, 0.0, 15.0)],
+                    vec![site(200.0, 0.0, 5.0, 10.0)],
+                ),
+            ])
             .unwrap();
         assert_eq!((r.inserted, r.withdrawn), (1, 1));
         assert_eq!(everything(&*store).len(), 1);
@@ -382,7 +589,10 @@ mod suite {
         let fc = |h: &str| {
             let ring = |x: f64| {
                 let p = square(x, 0.0, 10.0).exterior;
-                let mut c: Vec<[f64; 2]> = p.iter().map(|q| [q.longitude_deg, q.latitude_deg]).collect();
+                let mut c: Vec<[f64; 2]> = p
+                    .iter()
+                    .map(|q| [q.longitude_deg, q.latitude_deg])
+                    .collect();
                 c.push(c[0]);
                 c
             };
@@ -395,20 +605,42 @@ mod suite {
         let candidates: Vec<Candidate> = geojson::read_candidates(&fc("20")).unwrap();
         assert_eq!(store.import_candidates(&candidates, t(0)).unwrap(), 2);
         // Re-importing the same ids replaces them.
-        store.import_candidates(&geojson::read_candidates(&fc("21.5")).unwrap(), t(1)).unwrap();
+        store
+            .import_candidates(&geojson::read_candidates(&fc("21.5")).unwrap(), t(1))
+            .unwrap();
         assert_eq!(store.counts().unwrap().candidates, 2);
 
         // A confirmed site farther away than both candidates.
-        store.apply(&[obs(10, "a", vec![], vec![site(300.0, 0.0, 3.0, 10.0)])]).unwrap();
+        store
+            .apply(&[obs(10, "a", vec![], vec![site(300.0, 0.0, 3.0, 10.0)])])
+            .unwrap();
         let mut q = SearchQuery::new(ORIGIN, 1000.0);
-        assert_eq!(store.search(&q, t(20)).unwrap().sites.len(), 1, "no candidates unless asked");
+        assert_eq!(
+            store.search(&q, t(20)).unwrap().sites.len(),
+            1,
+            "no candidates unless asked"
+        );
         q.include_candidates = true;
         let all = store.search(&q, t(20)).unwrap().sites;
         let kinds: Vec<SiteKind> = all.iter().map(|f| f.site.kind).collect();
-        assert_eq!(kinds, [SiteKind::Confirmed, SiteKind::Candidate, SiteKind::Candidate]);
+        assert_eq!(
+            kinds,
+            [
+                SiteKind::Confirmed,
+                SiteKind::Candidate,
+                SiteKind::Candidate
+            ]
+        );
         let c = &all[1].site;
-        assert_eq!((c.source_id.as_deref(), c.plane_height_m), (Some("b1"), 21.5));
-        assert!((c.safe_radius_m - 10.0).abs() < 0.15, "the footprint's inscribed circle: {}", c.safe_radius_m);
+        assert_eq!(
+            (c.source_id.as_deref(), c.plane_height_m),
+            (Some("b1"), 21.5)
+        );
+        assert!(
+            (c.safe_radius_m - 10.0).abs() < 0.15,
+            "the footprint's inscribed circle: {}",
+            c.safe_radius_m
+        );
         assert!((c.area_m2 - 400.0).abs() < 0.1);
         // Paging across the boundary between sites and candidates.
         q.page_size = 1;
@@ -421,27 +653,62 @@ mod suite {
             }
             q.page_token = page.next_page_token;
         }
-        assert_eq!(kinds, [SiteKind::Confirmed, SiteKind::Candidate, SiteKind::Candidate]);
+        assert_eq!(
+            kinds,
+            [
+                SiteKind::Confirmed,
+                SiteKind::Candidate,
+                SiteKind::Candidate
+            ]
+        );
         // A look that finds the candidate roof blocked leaves the candidate alone.
-        let r = store.apply(&[obs(30, "b", vec![square(0.0, 0.0, 20.0)], vec![])]).unwrap();
+        let r = store
+            .apply(&[obs(30, "b", vec![square(0.0, 0.0, 20.0)], vec![])])
+            .unwrap();
         assert_eq!(r.withdrawn, 0);
         assert_eq!(store.counts().unwrap().candidates, 2);
         // A bad footprint is refused by name, and nothing of it stored.
         let mut bad = candidates.clone();
         bad[1].roof_height_m = f64::NAN;
-        assert_eq!(field_of(store.import_candidates(&bad, t(40)).unwrap_err()), "candidates[1].roof_height_m");
+        assert_eq!(
+            field_of(store.import_candidates(&bad, t(40)).unwrap_err()),
+            "candidates[1].roof_height_m"
+        );
     }
 
     pub fn expiry(b: &dyn Backend) {
         let store = b.open();
-        store.apply(&[obs(0, "a", vec![square(0.0, 0.0, 10.0)], vec![site(0.0, 0.0, 3.0, 10.0)])]).unwrap();
-        store.apply(&[obs(3600, "b", vec![square(50.0, 0.0, 10.0)], vec![site(50.0, 0.0, 3.0, 10.0)])]).unwrap();
-        let c = Candidate { footprint: square(100.0, 0.0, 10.0), roof_height_m: 10.0, source_id: None };
+        store
+            .apply(&[obs(
+                0,
+                "a",
+                vec![square(0.0, 0.0, 10.0)],
+                vec![site(0.0, 0.0, 3.0, 10.0)],
+            )])
+            .unwrap();
+        store
+            .apply(&[obs(
+                3600,
+                "b",
+                vec![square(50.0, 0.0, 10.0)],
+                vec![site(50.0, 0.0, 3.0, 10.0)],
+            )])
+            .unwrap();
+        let c = Candidate {
+            footprint: square(100.0, 0.0, 10.0),
+            roof_height_m: 10.0,
+            source_id: None,
+        };
         store.import_candidates(&[c], t(0)).unwrap();
-        let deleted = store.expire(t(3600 + 1800), Duration::from_secs(3600)).unwrap();
+        let deleted = store
+            .expire(t(3600 + 1800), Duration::from_secs(3600))
+            .unwrap();
         assert_eq!(deleted, 1);
         let counts = store.counts().unwrap();
-        assert_eq!((counts.confirmed, counts.candidates, counts.seen_areas), (1, 1, 1));
+        assert_eq!(
+            (counts.confirmed, counts.candidates, counts.seen_areas),
+            (1, 1, 1)
+        );
         assert_eq!(everything(&*store)[0].site.last_confirmed, t(3600));
         store.check_integrity().unwrap();
     }
@@ -478,7 +745,11 @@ mod suite {
             // Each roof: 20 observations of 2 frames, less those a newer look had already passed
             // (at most the 10 of one writer, when the other ran first).
             assert!((20..=40).contains(&f.site.frames), "{}", f.site.frames);
-            assert_eq!(f.site.last_confirmed, t(19), "the newest look is the last word");
+            assert_eq!(
+                f.site.last_confirmed,
+                t(19),
+                "the newest look is the last word"
+            );
             assert!(f.site.first_seen <= t(1));
             assert!(f.site.approaches >= 1);
         }
@@ -488,7 +759,9 @@ mod suite {
     pub fn reopen_keeps_everything(b: &dyn Backend) {
         {
             let store = b.open();
-            store.apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])]).unwrap();
+            store
+                .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
+                .unwrap();
         }
         // Opening again runs the migrations again: nothing to do, nothing lost.
         let store = b.open();
@@ -500,8 +773,13 @@ mod suite {
     pub fn geojson_results(b: &dyn Backend) {
         let store = b.open();
         let mut with_hole = site(0.0, 0.0, 3.0, 10.0);
-        with_hole.polygon = Polygon::new(square(0.0, 0.0, 10.0).exterior, vec![square(6.0, 6.0, 1.0).exterior]);
-        store.apply(&[obs(10, "a", vec![], vec![with_hole])]).unwrap();
+        with_hole.polygon = Polygon::new(
+            square(0.0, 0.0, 10.0).exterior,
+            vec![square(6.0, 6.0, 1.0).exterior],
+        );
+        store
+            .apply(&[obs(10, "a", vec![], vec![with_hole])])
+            .unwrap();
         let doc = geojson::write_results(&everything(&*store));
         assert_eq!(doc["type"], "FeatureCollection");
         let f = &doc["features"][0];
@@ -510,14 +788,24 @@ mod suite {
         let rings = f["geometry"]["coordinates"].as_array().unwrap();
         assert_eq!(rings.len(), 2);
         let signed = |ring: &serde_json::Value| {
-            let pts: Vec<(f64, f64)> = ring.as_array().unwrap().iter().map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap())).collect();
+            let pts: Vec<(f64, f64)> = ring
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+                .collect();
             assert_eq!(pts.first(), pts.last(), "closed");
-            pts.windows(2).map(|w| w[0].0 * w[1].1 - w[1].0 * w[0].1).sum::<f64>()
+            pts.windows(2)
+                .map(|w| w[0].0 * w[1].1 - w[1].0 * w[0].1)
+                .sum::<f64>()
         };
         assert!(signed(&rings[0]) > 0.0, "outer ring counter-clockwise");
         assert!(signed(&rings[1]) < 0.0, "hole clockwise");
         let lon = rings[0][0][0].as_f64().unwrap();
-        assert!((lon - ORIGIN.longitude_deg).abs() < 0.001, "longitude first");
+        assert!(
+            (lon - ORIGIN.longitude_deg).abs() < 0.001,
+            "longitude first"
+        );
     }
 }
 

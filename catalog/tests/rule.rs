@@ -5,7 +5,7 @@ use std::collections::HashSet;
 
 use landing_catalog::rule::{plan, same_roof};
 use landing_catalog::{
-    LatLon, LocalFrame, ObservedSite, Observation, Polygon, Site, SiteId, SiteKind, Timestamp,
+    LatLon, LocalFrame, Observation, ObservedSite, Polygon, Site, SiteId, SiteKind, Timestamp,
 };
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestRng, TestRunner};
@@ -14,7 +14,10 @@ const ORIGIN: LatLon = LatLon::new(47.3769, 8.5417);
 
 fn square(x: f64, y: f64, half: f64) -> Polygon {
     let f = LocalFrame::new(ORIGIN);
-    Polygon::rectangle(f.to_lat_lon((x - half, y - half)), f.to_lat_lon((x + half, y + half)))
+    Polygon::rectangle(
+        f.to_lat_lon((x - half, y - half)),
+        f.to_lat_lon((x + half, y + half)),
+    )
 }
 
 fn t(s: i64) -> Timestamp {
@@ -45,7 +48,11 @@ fn scene() -> impl Strategy<Value = (Vec<Site>, Observation, Vec<(Timestamp, Pol
                 .enumerate()
                 .map(|(i, (x, y, r, level, at))| Site {
                     id: SiteId(i as i64 + 1),
-                    kind: if i % 7 == 6 { SiteKind::Candidate } else { SiteKind::Confirmed },
+                    kind: if i % 7 == 6 {
+                        SiteKind::Candidate
+                    } else {
+                        SiteKind::Confirmed
+                    },
                     polygon: square(x, y, r + 1.0),
                     center: f.to_lat_lon((x, y)),
                     safe_radius_m: r,
@@ -78,21 +85,33 @@ fn scene() -> impl Strategy<Value = (Vec<Site>, Observation, Vec<(Timestamp, Pol
                     })
                     .collect(),
             };
-            let newer = newer.into_iter().map(|(x, y, h, at)| (t(at), square(x, y, h))).collect();
+            let newer = newer
+                .into_iter()
+                .map(|(x, y, h, at)| (t(at), square(x, y, h)))
+                .collect();
             (stored, obs, newer)
         })
 }
 
 #[test]
 fn the_rule_holds_on_random_scenes() {
-    let config = Config { cases: 2000, failure_persistence: None, ..Config::default() };
-    let mut runner = TestRunner::new_with_rng(config, TestRng::deterministic_rng(RngAlgorithm::ChaCha));
+    let config = Config {
+        cases: 2000,
+        failure_persistence: None,
+        ..Config::default()
+    };
+    let mut runner =
+        TestRunner::new_with_rng(config, TestRng::deterministic_rng(RngAlgorithm::ChaCha));
     runner
         .run(&scene(), |(stored, obs, newer)| {
             let p = plan(&obs, &stored, &newer);
             let updated: HashSet<SiteId> = p.updates.iter().map(|s| s.id).collect();
             let deleted: HashSet<SiteId> = p.deletes.iter().copied().collect();
-            prop_assert_eq!(updated.len(), p.updates.len(), "a site is updated at most once");
+            prop_assert_eq!(
+                updated.len(),
+                p.updates.len(),
+                "a site is updated at most once"
+            );
             prop_assert!(updated.is_disjoint(&deleted), "updated and deleted");
             // Every new site is inserted, updates one stored site, or is dropped as stale.
             prop_assert_eq!(
@@ -106,7 +125,10 @@ fn the_rule_holds_on_random_scenes() {
                     prop_assert!(!touched, "candidates and newer sites are never touched");
                     continue;
                 }
-                let in_seen = obs.seen.iter().any(|a| a.meets_circle(s.center, s.safe_radius_m));
+                let in_seen = obs
+                    .seen
+                    .iter()
+                    .any(|a| a.meets_circle(s.center, s.safe_radius_m));
                 let matched = obs.sites.iter().any(|n| same_roof(s, n));
                 if in_seen {
                     // Seen: confirmed by a new site, else gone (withdrawn or merged).
@@ -123,10 +145,17 @@ fn the_rule_holds_on_random_scenes() {
                 prop_assert_eq!(u.frames, before.frames + 2);
                 let same_approach = before.approach_id == obs.approach_id;
                 prop_assert_eq!(u.approaches, before.approaches + u64::from(!same_approach));
-                prop_assert!(obs.sites.iter().any(|n| n.center == u.center && same_roof(before, n)));
+                prop_assert!(
+                    obs.sites
+                        .iter()
+                        .any(|n| n.center == u.center && same_roof(before, n))
+                );
             }
             for i in &p.inserts {
-                prop_assert_eq!((i.first_seen, i.last_confirmed, i.approaches), (obs.t, obs.t, 1));
+                prop_assert_eq!(
+                    (i.first_seen, i.last_confirmed, i.approaches),
+                    (obs.t, obs.t, 1)
+                );
             }
             // No new site that newer knowledge covers is written.
             for w in p.inserts.iter().chain(&p.updates) {
@@ -176,7 +205,10 @@ fn a_divided_roof_keeps_its_record_and_gains_one() {
         ..Default::default()
     };
     let p = plan(&obs, &[stored], &[]);
-    assert_eq!((p.updates.len(), p.inserts.len(), p.deletes.len()), (1, 1, 0));
+    assert_eq!(
+        (p.updates.len(), p.inserts.len(), p.deletes.len()),
+        (1, 1, 0)
+    );
     assert_eq!(p.updates[0].safe_radius_m, 3.5);
     assert_eq!(p.updates[0].first_seen, t(1));
     assert_eq!(p.inserts[0].first_seen, t(10));

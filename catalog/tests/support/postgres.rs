@@ -11,7 +11,8 @@ use std::process::Command;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, Weak};
 
-const SETUP: &str = "run `bash scripts/setup-postgres.sh` (as root) to install PostgreSQL and PostGIS";
+const SETUP: &str =
+    "run `bash scripts/setup-postgres.sh` (as root) to install PostgreSQL and PostGIS";
 
 /// A running server.
 pub struct PgServer {
@@ -39,10 +40,19 @@ impl PgServer {
     fn start() -> PgServer {
         let bin = find_bin();
         let root = run_output(Command::new("id").arg("-u")).trim() == "0";
-        let dir = tempfile::Builder::new().prefix("catalog-pg-").tempdir().expect("a temp dir");
+        let dir = tempfile::Builder::new()
+            .prefix("catalog-pg-")
+            .tempdir()
+            .expect("a temp dir");
         if root {
-            let uid: u32 = run_output(Command::new("id").args(["-u", "postgres"])).trim().parse().expect("uid");
-            let gid: u32 = run_output(Command::new("id").args(["-g", "postgres"])).trim().parse().expect("gid");
+            let uid: u32 = run_output(Command::new("id").args(["-u", "postgres"]))
+                .trim()
+                .parse()
+                .expect("uid");
+            let gid: u32 = run_output(Command::new("id").args(["-g", "postgres"]))
+                .trim()
+                .parse()
+                .expect("gid");
             std::os::unix::fs::chown(dir.path(), Some(uid), Some(gid)).expect("chown the temp dir");
         }
         let port = std::net::TcpListener::bind("127.0.0.1:0")
@@ -58,20 +68,42 @@ impl PgServer {
             create_lock: Mutex::new(()),
         };
         let data = server.data();
-        server.run("initdb", &["-D", &data, "-A", "trust", "-U", "postgres", "-E", "UTF8", "--no-sync"]);
+        server.run(
+            "initdb",
+            &[
+                "-D",
+                &data,
+                "-A",
+                "trust",
+                "-U",
+                "postgres",
+                "-E",
+                "UTF8",
+                "--no-sync",
+            ],
+        );
         let sock = server.dir.path().display().to_string();
         let opts = format!(
             "-p {port} -k {sock} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off \
              -c full_page_writes=off -c max_connections=200"
         );
         let log = format!("{sock}/server.log");
-        server.run("pg_ctl", &["-D", &data, "-o", &opts, "-l", &log, "-w", "-t", "120", "start"]);
+        server.run(
+            "pg_ctl",
+            &[
+                "-D", &data, "-o", &opts, "-l", &log, "-w", "-t", "120", "start",
+            ],
+        );
         let mut admin = server.connect("postgres");
-        admin.batch_execute("CREATE DATABASE template_postgis").expect("create the template database");
+        admin
+            .batch_execute("CREATE DATABASE template_postgis")
+            .expect("create the template database");
         let mut template = server.connect("template_postgis");
-        template.batch_execute("CREATE EXTENSION postgis").unwrap_or_else(|e| {
-            panic!("CREATE EXTENSION postgis failed ({e}): PostGIS is not installed? {SETUP}")
-        });
+        template
+            .batch_execute("CREATE EXTENSION postgis")
+            .unwrap_or_else(|e| {
+                panic!("CREATE EXTENSION postgis failed ({e}): PostGIS is not installed? {SETUP}")
+            });
         server
     }
 
@@ -89,7 +121,10 @@ impl PgServer {
 
     /// The connection string for `database`.
     pub fn url(&self, database: &str) -> String {
-        format!("host=127.0.0.1 port={} user=postgres dbname={database} connect_timeout=10", self.port)
+        format!(
+            "host=127.0.0.1 port={} user=postgres dbname={database} connect_timeout=10",
+            self.port
+        )
     }
 
     fn connect(&self, database: &str) -> postgres::Client {
@@ -111,9 +146,12 @@ impl PgServer {
             Command::new(&exe)
         };
         cmd.args(args).current_dir(self.dir.path());
-        let out = cmd.output().unwrap_or_else(|e| panic!("run {}: {e}. {SETUP}", exe.display()));
+        let out = cmd
+            .output()
+            .unwrap_or_else(|e| panic!("run {}: {e}. {SETUP}", exe.display()));
         if !out.status.success() {
-            let log = std::fs::read_to_string(self.dir.path().join("server.log")).unwrap_or_default();
+            let log =
+                std::fs::read_to_string(self.dir.path().join("server.log")).unwrap_or_default();
             panic!(
                 "{tool} failed: {}\n{}\n{}\n{log}",
                 out.status,
@@ -159,12 +197,19 @@ fn find_bin() -> PathBuf {
         panic!("no PostgreSQL server binaries under /usr/lib/postgresql/*/bin: {SETUP}");
     };
     let control = format!("/usr/share/postgresql/{version}/extension/postgis.control");
-    assert!(Path::new(&control).exists(), "PostGIS is not installed for PostgreSQL {version} ({control} is missing): {SETUP}");
+    assert!(
+        Path::new(&control).exists(),
+        "PostGIS is not installed for PostgreSQL {version} ({control} is missing): {SETUP}"
+    );
     bin
 }
 
 fn run_output(cmd: &mut Command) -> String {
     let out = cmd.output().unwrap_or_else(|e| panic!("run {cmd:?}: {e}"));
-    assert!(out.status.success(), "{cmd:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{cmd:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
