@@ -153,12 +153,16 @@ impl Store for SqliteStore {
                 SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
                 SiteKind::Candidate => i64::MIN,
             };
+            // First the few columns that filter and order, for every box the R*Tree returns;
+            // then whole records (polygons parsed) for the page alone.
             let mut stmt = conn
-                .prepare_cached(&format!(
-                    "SELECT {SITE_COLUMNS} FROM sites_rtree t JOIN sites s ON s.id = t.id \
-                     WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 AND t.min_lon <= ?4 \
-                     AND s.kind = ?5 AND s.safe_radius_m >= ?6 AND s.last_confirmed_ms >= ?7"
-                ))
+                .prepare_cached(
+                    "SELECT s.id, s.latitude_deg, s.longitude_deg, s.safe_radius_m, \
+                     s.last_confirmed_ms FROM sites_rtree t JOIN sites s ON s.id = t.id \
+                     WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 \
+                     AND t.min_lon <= ?4 AND s.kind = ?5 AND s.safe_radius_m >= ?6 \
+                     AND s.last_confirmed_ms >= ?7",
+                )
                 .map_err(db)?;
             let rows = stmt
                 .query_map(
@@ -171,18 +175,47 @@ impl Store for SqliteStore {
                         r.min_safe_radius_m,
                         cutoff
                     ],
-                    site_from_row,
+                    |row| {
+                        Ok(Site {
+                            id: SiteId(row.get(0)?),
+                            kind,
+                            polygon: Polygon::default(),
+                            center: LatLon::new(row.get(1)?, row.get(2)?),
+                            safe_radius_m: row.get(3)?,
+                            plane_height_m: 0.0,
+                            area_m2: 0.0,
+                            first_seen: Timestamp::default(),
+                            last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
+                            frames: 0,
+                            approaches: 0,
+                            drone_id: String::new(),
+                            approach_id: String::new(),
+                            model_id: String::new(),
+                            source_id: None,
+                        })
+                    },
                 )
                 .map_err(db)?;
             let mut all = Vec::new();
             for row in rows {
-                let site = row.map_err(db)??;
+                let site = row.map_err(db)?;
                 let distance_m = distance_m(r.center, site.center);
                 if r.admits(&site, distance_m) {
                     all.push(Found { site, distance_m });
                 }
             }
-            Ok(order_group(r, all, after, limit))
+            let mut page = order_group(r, all, after, limit);
+            let mut whole = conn
+                .prepare_cached(&format!(
+                    "SELECT {SITE_COLUMNS} FROM sites s WHERE s.id = ?1"
+                ))
+                .map_err(db)?;
+            for f in &mut page {
+                f.site = whole
+                    .query_row([f.site.id.0], site_from_row)
+                    .map_err(db)??;
+            }
+            Ok(page)
         })
     }
 
