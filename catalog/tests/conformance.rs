@@ -880,3 +880,101 @@ macro_rules! conformance {
 
 conformance!(sqlite, Sqlite::new());
 conformance!(postgis, Postgis::new());
+
+/// What only one store has: files, schema versions, connections.
+mod specific {
+    use super::scene::*;
+    use super::*;
+
+    #[test]
+    fn sqlite_file_is_wal_versioned_and_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("catalog.sqlite");
+        let store = SqliteStore::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 1);
+        store
+            .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
+            .unwrap();
+        store.check_integrity().unwrap();
+        drop(store);
+        let raw = rusqlite::Connection::open(&path).unwrap();
+        let mode: String = raw
+            .query_row("PRAGMA journal_mode", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(mode, "wal");
+        // A file from a newer build is refused, not misread.
+        raw.execute("INSERT INTO schema_version (version) VALUES (99)", [])
+            .unwrap();
+        drop(raw);
+        let e = SqliteStore::open(&path).unwrap_err();
+        assert!(
+            matches!(e, Error::Corrupt { .. }) && e.to_string().contains("99"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn sqlite_integrity_check_finds_a_broken_index() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("catalog.sqlite");
+        let store = SqliteStore::open(&path).unwrap();
+        store
+            .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
+            .unwrap();
+        let raw = rusqlite::Connection::open(&path).unwrap();
+        raw.execute("DELETE FROM sites_rtree", []).unwrap();
+        let e = store.check_integrity().unwrap_err();
+        assert!(matches!(e, Error::Corrupt { .. }), "{e}");
+    }
+
+    #[test]
+    fn postgis_reconnects_after_losing_its_connection() {
+        let server = pg::shared();
+        let url = server.create_database();
+        let store = PostgisStore::connect(&url).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 1);
+        store
+            .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
+            .unwrap();
+        // The server ends every session of the store's database (a restart, a failover).
+        let mut admin =
+            postgres::Client::connect(&server.url("postgres"), postgres::NoTls).unwrap();
+        let dbname = url
+            .rsplit("dbname=")
+            .next()
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .to_string();
+        admin
+            .execute(
+                "SELECT pg_terminate_backend(pid) FROM pg_stat_activity WHERE datname = $1",
+                &[&dbname],
+            )
+            .unwrap();
+        // The call that meets the dead connection fails as unavailable storage; the next one
+        // connects again.
+        let mut answered = false;
+        for _ in 0..3 {
+            match store.search(&SearchQuery::new(ORIGIN, 100.0), t(20)) {
+                Ok(page) => {
+                    assert_eq!(page.sites.len(), 1);
+                    answered = true;
+                    break;
+                }
+                Err(e) => assert!(
+                    matches!(
+                        e,
+                        Error::Storage {
+                            backend: "postgis",
+                            ..
+                        }
+                    ),
+                    "{e}"
+                ),
+            }
+        }
+        assert!(answered, "the store connected again");
+    }
+}
