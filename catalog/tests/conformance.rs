@@ -115,6 +115,23 @@ mod scene {
         page.sites
     }
 
+    /// A seeded linear congruential generator: the scenes need no more.
+    pub struct Lcg(pub u64);
+
+    impl Lcg {
+        pub fn next(&mut self) -> u64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            self.0 >> 33
+        }
+
+        pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * (self.next() as f64 / (1u64 << 31) as f64)
+        }
+    }
+
     pub fn field_of(e: Error) -> String {
         e.field()
             .unwrap_or_else(|| panic!("not a field error: {e}"))
@@ -807,6 +824,114 @@ mod suite {
             "longitude first"
         );
     }
+
+    /// Seeded random sites and searches, paged, against a brute-force answer over every record.
+    pub fn random_searches_match_brute_force(b: &dyn Backend) {
+        let store = b.open();
+        let mut rng = Lcg(0x5eed_0001);
+        for batch in 0..6 {
+            let observations: Vec<Observation> = (0..10)
+                .map(|k| {
+                    let sites = (0..6)
+                        .map(|_| {
+                            let (x, y) = (rng.range(-1500.0, 1500.0), rng.range(-1500.0, 1500.0));
+                            site(x, y, rng.range(0.5, 9.0), rng.range(0.0, 60.0).round())
+                        })
+                        .collect();
+                    obs(
+                        batch * 600 + k * 30,
+                        &format!("r{batch}-{k}"),
+                        vec![],
+                        sites,
+                    )
+                })
+                .collect();
+            store.apply(&observations).unwrap();
+        }
+        let candidates: Vec<Candidate> = (0..25)
+            .map(|i| Candidate {
+                footprint: square(
+                    rng.range(-1500.0, 1500.0),
+                    rng.range(-1500.0, 1500.0),
+                    rng.range(4.0, 20.0),
+                ),
+                roof_height_m: 20.0,
+                source_id: Some(format!("c{i}")),
+            })
+            .collect();
+        store.import_candidates(&candidates, t(0)).unwrap();
+        let records = everything(&*store);
+        assert!(records.len() > 250, "{}", records.len());
+        let now = t(3600);
+        let (mut results, mut pages) = (0, 0);
+        for case in 0..40 {
+            let mut q = SearchQuery::new(
+                at(rng.range(-1200.0, 1200.0), rng.range(-1200.0, 1200.0)),
+                rng.range(50.0, 1500.0),
+            );
+            q.order = [Order::Distance, Order::SafeRadius, Order::Freshness][case % 3];
+            q.include_candidates = case % 2 == 0;
+            q.min_safe_radius_m = if case % 4 == 1 {
+                rng.range(0.0, 6.0)
+            } else {
+                0.0
+            };
+            q.max_age = match case % 5 {
+                0 => None,
+                1 => Some(Duration::from_secs(rng.range(0.0, 3600.0) as u64)),
+                _ => Some(Duration::from_secs(86_400)),
+            };
+            q.page_size = 1 + (rng.next() % 40) as i32;
+            // Brute force: every record, filtered and ordered by the documented rules.
+            let cutoff = q.max_age.map(|a| now.saturating_sub(a));
+            let mut want: Vec<(u8, f64, i64)> = records
+                .iter()
+                .filter_map(|f| {
+                    let s = &f.site;
+                    let d = landing_catalog::distance_m(q.center, s.center);
+                    let confirmed = s.kind == SiteKind::Confirmed;
+                    let keep = d <= q.radius_m
+                        && s.safe_radius_m >= q.min_safe_radius_m
+                        && (confirmed || q.include_candidates)
+                        && (!confirmed || cutoff.is_none_or(|c| s.last_confirmed >= c));
+                    let key = match (q.order, confirmed) {
+                        (Order::Distance, _) | (Order::Freshness, false) => d,
+                        (Order::SafeRadius, _) => -s.safe_radius_m,
+                        (Order::Freshness, true) => -(s.last_confirmed.unix_ms() as f64),
+                    };
+                    keep.then_some((u8::from(!confirmed), key, s.id.0))
+                })
+                .collect();
+            want.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let want: Vec<i64> = want.into_iter().map(|w| w.2).collect();
+            let mut got = Vec::new();
+            for _ in 0..1000 {
+                let page = store.search(&q, now).unwrap();
+                assert!(page.sites.len() <= q.page_size as usize);
+                for f in &page.sites {
+                    let d = landing_catalog::distance_m(q.center, f.site.center);
+                    assert!(
+                        (f.distance_m - d).abs() < 0.01,
+                        "distance {} against {d}",
+                        f.distance_m
+                    );
+                }
+                got.extend(page.sites.iter().map(|f| f.site.id.0));
+                pages += 1;
+                if page.next_page_token.is_empty() {
+                    break;
+                }
+                q.page_token = page.next_page_token;
+            }
+            assert_eq!(got, want, "case {case}: {q:?}");
+            results += got.len();
+        }
+        // The cases are not vacuous: many results, most searches over several pages.
+        assert!(
+            results > 1000 && pages > 100,
+            "{results} results on {pages} pages"
+        );
+    }
 }
 
 macro_rules! conformance {
@@ -873,6 +998,10 @@ macro_rules! conformance {
             #[test]
             fn geojson_results() {
                 suite::geojson_results(&$backend);
+            }
+            #[test]
+            fn random_searches_match_brute_force() {
+                suite::random_searches_match_brute_force(&$backend);
             }
         }
     };
