@@ -65,6 +65,13 @@
 //!
 //! # For the server (what comes next)
 //!
+//! - Config: `[catalog] path` or `url` → [`Location::parse`] → [`Location::open`] (at start, on
+//!   a thread of its own: it runs the migrations), shared as `Arc<dyn Store>`.
+//! - Observations: `seen` is the ground the cameras resolved (a fused answer's cells seen finely
+//!   enough, as polygons) and only sites whose circles lie in it are admitted. Each observation's
+//!   `seen` polygons are kept (until [`Store::expire`]) to turn away late observations, so send
+//!   few, large observations (one per stream every few seconds, or per approach), not one per
+//!   frame. Frames without a geodetic origin have no WGS-84 and are not observations.
 //! - Write path: a bounded queue drained by one thread that calls [`Store::apply`] with batches;
 //!   on `Err` it counts the failure and drops (oldest first), the frame path never waits.
 //!   [`ApplyReport`] gives the write metrics, [`Store::counts`] the stored-sites gauge.
@@ -85,6 +92,7 @@ mod error;
 pub mod geo;
 pub mod geojson;
 mod model;
+mod open;
 mod postgis;
 mod query;
 pub mod rule;
@@ -95,6 +103,7 @@ mod time;
 pub use error::{Error, Result};
 pub use geo::{Bbox, LatLon, LocalFrame, Polygon, distance_m};
 pub use model::{Candidate, Observation, ObservedSite, Site, SiteId, SiteKind};
+pub use open::Location;
 pub use postgis::PostgisStore;
 pub use query::{
     DEFAULT_MAX_AGE, DEFAULT_PAGE_SIZE, Found, MAX_PAGE_SIZE, MAX_SEARCH_RADIUS_M, Order,

@@ -56,7 +56,9 @@ pub struct Site {
     pub last_confirmed: Timestamp,
     /// How many frames confirmed it, over all approaches.
     pub frames: u64,
-    /// How many approaches confirmed it.
+    /// How many approaches confirmed it: counted when the confirming approach differs from the
+    /// one before (only the last is stored), so two approaches confirming one roof in turn count
+    /// each turn.
     pub approaches: u64,
     /// The drone that last confirmed it.
     pub drone_id: String,
