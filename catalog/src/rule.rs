@@ -11,8 +11,9 @@
 //!    site there, or found it blocked. A circle that only grazes the seen area counts as seen:
 //!    safety over coverage.
 //! 2. A stored site that a new site confirms ([`same_roof`]) is **updated**: the new polygon,
-//!    centre, radius and plane height, `last_confirmed = t`, frames added, approaches counted once
-//!    per approach, `first_seen` kept (the earliest of every stored site it merges).
+//!    centre, radius and plane height, `last_confirmed = t`, frames added, approaches counted when
+//!    the approach is not the one that confirmed it last, `first_seen` kept (the earliest of every
+//!    stored site it merges).
 //! 3. A new site that confirms no stored site is **inserted**.
 //! 4. Stored sites whose circles do not meet the seen area and that no new site matches are
 //!    **untouched** and keep their last confirmation time.
