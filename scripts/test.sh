@@ -30,6 +30,7 @@ if cargo tree --locked -p landing-server -e normal --prefix none | grep -E '^lan
 fi
 
 step "Rust tests (unit, property, doc, end-to-end)"
+bash scripts/setup-postgres.sh  # the catalog's conformance suite starts a PostgreSQL + PostGIS
 cargo test --workspace --locked
 
 step "release binaries"

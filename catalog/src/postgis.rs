@@ -1,0 +1,537 @@
+//! The fleet store: PostgreSQL with PostGIS, one database that every replica reads and writes.
+//!
+//! # Schema (version 1)
+//!
+//! ```sql
+//! catalog_schema_version(version INTEGER)
+//! catalog_sites(id BIGSERIAL PRIMARY KEY, kind SMALLINT,          -- 0 confirmed, 1 candidate
+//!               polygon geography(POLYGON, 4326),                -- the landable polygon
+//!               center geography(POINT, 4326),                   -- the safest point (GiST)
+//!               bbox geometry,                                   -- polygon ∪ safe circle (GiST)
+//!               safe_radius_m, plane_height_m, area_m2 DOUBLE PRECISION,
+//!               first_seen_ms, last_confirmed_ms, frames, approaches BIGINT,
+//!               drone_id, approach_id, model_id TEXT, source_id TEXT UNIQUE)
+//! catalog_seen(id BIGSERIAL PRIMARY KEY, observed_ms BIGINT,
+//!              area geography(POLYGON, 4326), bbox geometry)     -- GiST on bbox
+//! ```
+//!
+//! Searches filter with `ST_DWithin(center, point, r, false)` and order nearest first with
+//! `ORDER BY center <-> point, id LIMIT k` (the GiST index's nearest-neighbour scan); the distance
+//! reported is that same sphere distance, so page tokens and results agree. Writers serialise on a
+//! transaction-scoped advisory lock ([`WRITE_LOCK`]): a batch reads what it may change and writes
+//! in one transaction that no other writer interleaves with, so two replicas applying
+//! overlapping observations end as if one went first (row locks alone would not stop two writers
+//! inserting the same new roof twice). Readers never wait for it. Migrations run at connect under
+//! the same lock.
+//!
+//! The client is the `postgres` crate, which drives `tokio-postgres` on a runtime of its own:
+//! calling it from inside a tokio runtime panics, so the server calls it from its own threads (or
+//! `spawn_blocking`). A lost connection is opened again on the next call.
+
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+use postgres::{Client, NoTls, Row, Transaction};
+
+use crate::apply::{WriteTx, apply_sorted, validate};
+use crate::error::{Error, Result};
+use crate::geo::{Bbox, LatLon, Polygon};
+use crate::geojson::{polygon_from_coordinates, polygon_geometry};
+use crate::model::{Candidate, Observation, Site, SiteId, SiteKind};
+use crate::query::{Found, Order, Resolved, SearchPage, SearchQuery};
+use crate::rule::ApplyReport;
+use crate::store::{Counts, Store};
+use crate::time::Timestamp;
+
+const BACKEND: &str = "postgis";
+
+/// The advisory lock key every catalog writer takes (`pg_advisory_xact_lock`): "landcat" in ASCII.
+pub const WRITE_LOCK: i64 = 0x006c_616e_6463_6174;
+
+const MIGRATIONS: &[&str] = &[r#"
+CREATE EXTENSION IF NOT EXISTS postgis;
+CREATE TABLE catalog_sites (
+    id BIGSERIAL PRIMARY KEY,
+    kind SMALLINT NOT NULL CHECK (kind IN (0, 1)),
+    polygon geography(POLYGON, 4326) NOT NULL,
+    center geography(POINT, 4326) NOT NULL,
+    bbox geometry NOT NULL,
+    safe_radius_m DOUBLE PRECISION NOT NULL,
+    plane_height_m DOUBLE PRECISION NOT NULL,
+    area_m2 DOUBLE PRECISION NOT NULL,
+    first_seen_ms BIGINT NOT NULL,
+    last_confirmed_ms BIGINT NOT NULL,
+    frames BIGINT NOT NULL,
+    approaches BIGINT NOT NULL,
+    drone_id TEXT NOT NULL,
+    approach_id TEXT NOT NULL,
+    model_id TEXT NOT NULL,
+    source_id TEXT UNIQUE
+);
+CREATE INDEX catalog_sites_center ON catalog_sites USING GIST (center);
+CREATE INDEX catalog_sites_bbox ON catalog_sites USING GIST (bbox);
+CREATE INDEX catalog_sites_kind_last_confirmed ON catalog_sites (kind, last_confirmed_ms);
+CREATE TABLE catalog_seen (
+    id BIGSERIAL PRIMARY KEY,
+    observed_ms BIGINT NOT NULL,
+    area geography(POLYGON, 4326) NOT NULL,
+    bbox geometry NOT NULL
+);
+CREATE INDEX catalog_seen_bbox ON catalog_seen USING GIST (bbox);
+CREATE INDEX catalog_seen_observed ON catalog_seen (observed_ms);
+"#];
+
+const SITE_COLUMNS: &str = "id, kind, ST_AsGeoJSON(polygon, 15), ST_Y(center::geometry), \
+    ST_X(center::geometry), safe_radius_m, plane_height_m, area_m2, first_seen_ms, \
+    last_confirmed_ms, frames, approaches, drone_id, approach_id, model_id, source_id";
+
+/// The query point `$1` = latitude, `$2` = longitude, as geography.
+const POINT: &str = "ST_SetSRID(ST_MakePoint($2, $1), 4326)::geography";
+
+/// The catalog in a PostgreSQL database with PostGIS.
+pub struct PostgisStore {
+    url: String,
+    client: Mutex<Option<Client>>,
+}
+
+impl std::fmt::Debug for PostgisStore {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        // The URL may hold a password.
+        f.debug_struct("PostgisStore").finish_non_exhaustive()
+    }
+}
+
+impl PostgisStore {
+    /// Connects to `url` (`postgres://user:password@host:port/database`, or the key=value form;
+    /// `connect_timeout=5` is worth setting) and brings the schema up to date. The database user
+    /// needs `CREATE` there, and the PostGIS extension must exist or be creatable.
+    pub fn connect(url: &str) -> Result<Self> {
+        let store = PostgisStore {
+            url: url.to_string(),
+            client: Mutex::new(None),
+        };
+        {
+            let mut guard = store.client()?;
+            let client = guard.as_mut().ok_or_else(disconnected)?;
+            migrate(client)?;
+        }
+        Ok(store)
+    }
+
+    /// The schema version the database is at.
+    pub fn schema_version(&self) -> Result<u32> {
+        let mut guard = self.client()?;
+        let client = guard.as_mut().ok_or_else(disconnected)?;
+        let row = client
+            .query_one(
+                "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+                &[],
+            )
+            .map_err(db)?;
+        Ok(row.get::<_, i32>(0).max(0) as u32)
+    }
+
+    /// The connection, opened again when it was lost.
+    fn client(&self) -> Result<MutexGuard<'_, Option<Client>>> {
+        let mut guard = self.client.lock().unwrap_or_else(|e| e.into_inner());
+        if guard.as_ref().is_none_or(Client::is_closed) {
+            *guard = Some(Client::connect(&self.url, NoTls).map_err(db)?);
+        }
+        Ok(guard)
+    }
+
+    /// Runs `f` in a transaction holding the write lock; commits when it returns `Ok`.
+    fn write<T>(&self, f: impl FnOnce(&mut Transaction<'_>) -> Result<T>) -> Result<T> {
+        let mut guard = self.client()?;
+        let client = guard.as_mut().ok_or_else(disconnected)?;
+        let mut tx = client.transaction().map_err(db)?;
+        tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK])
+            .map_err(db)?;
+        let out = f(&mut tx)?;
+        tx.commit().map_err(db)?;
+        Ok(out)
+    }
+}
+
+impl Store for PostgisStore {
+    fn backend(&self) -> &'static str {
+        BACKEND
+    }
+
+    fn apply(&self, batch: &[Observation]) -> Result<ApplyReport> {
+        let sorted = validate(batch)?;
+        self.write(|tx| apply_sorted(&mut PgTx { tx }, &sorted))
+    }
+
+    fn search(&self, query: &SearchQuery, now: Timestamp) -> Result<SearchPage> {
+        let r = Resolved::new(query, now)?;
+        let mut guard = self.client()?;
+        let client = guard.as_mut().ok_or_else(disconnected)?;
+        r.page(&mut |r, kind, after, limit| {
+            let key = match (r.order, kind) {
+                (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate) => {
+                    format!("(center <-> {POINT})")
+                }
+                (Order::SafeRadius, _) => "(-safe_radius_m)".to_string(),
+                (Order::Freshness, SiteKind::Confirmed) => {
+                    "(-(last_confirmed_ms::float8))".to_string()
+                }
+            };
+            let cutoff = match kind {
+                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+                SiteKind::Candidate => i64::MIN,
+            };
+            let (after_key, after_id) = after.unwrap_or((f64::NEG_INFINITY, i64::MIN));
+            let sql = format!(
+                "SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
+                 WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
+                 AND center <-> {POINT} <= $4 \
+                 AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
+                 AND ({key}, id) > ($7, $8) \
+                 ORDER BY {key}, id LIMIT $9"
+            );
+            let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+            let rows = client
+                .query(
+                    &sql,
+                    &[
+                        &r.center.latitude_deg,
+                        &r.center.longitude_deg,
+                        &kind_code(kind),
+                        &r.radius_m,
+                        &r.min_safe_radius_m,
+                        &cutoff,
+                        &after_key,
+                        &after_id,
+                        &limit,
+                    ],
+                )
+                .map_err(db)?;
+            rows.iter()
+                .map(|row| {
+                    Ok(Found {
+                        site: site_from_row(row)?,
+                        distance_m: row.get(16),
+                    })
+                })
+                .collect()
+        })
+    }
+
+    fn expire(&self, now: Timestamp, retention: Duration) -> Result<u64> {
+        let cutoff = now.saturating_sub(retention).unix_ms();
+        self.write(|tx| {
+            let n = tx
+                .execute(
+                    "DELETE FROM catalog_sites WHERE kind = 0 AND last_confirmed_ms < $1",
+                    &[&cutoff],
+                )
+                .map_err(db)?;
+            tx.execute(
+                "DELETE FROM catalog_seen WHERE observed_ms < $1",
+                &[&cutoff],
+            )
+            .map_err(db)?;
+            Ok(n)
+        })
+    }
+
+    fn import_candidates(&self, candidates: &[Candidate], now: Timestamp) -> Result<u64> {
+        for (i, c) in candidates.iter().enumerate() {
+            c.validate(&format!("candidates[{i}]"))?;
+        }
+        self.write(|tx| {
+            let mut w = PgTx { tx };
+            for c in candidates {
+                if let Some(src) = &c.source_id {
+                    w.tx.execute("DELETE FROM catalog_sites WHERE source_id = $1", &[src])
+                        .map_err(db)?;
+                }
+                w.insert(&c.to_site(now))?;
+            }
+            Ok(candidates.len() as u64)
+        })
+    }
+
+    fn counts(&self) -> Result<Counts> {
+        let mut guard = self.client()?;
+        let client = guard.as_mut().ok_or_else(disconnected)?;
+        let row = client
+            .query_one(
+                "SELECT (SELECT COUNT(*) FROM catalog_sites WHERE kind = 0), \
+                 (SELECT COUNT(*) FROM catalog_sites WHERE kind = 1), \
+                 (SELECT COUNT(*) FROM catalog_seen)",
+                &[],
+            )
+            .map_err(db)?;
+        let n = |i: usize| row.get::<_, i64>(i).max(0) as u64;
+        Ok(Counts {
+            confirmed: n(0),
+            candidates: n(1),
+            seen_areas: n(2),
+        })
+    }
+
+    fn check_integrity(&self) -> Result<()> {
+        let known = MIGRATIONS.len() as i32;
+        let mut guard = self.client()?;
+        let client = guard.as_mut().ok_or_else(disconnected)?;
+        let at: i32 = client
+            .query_one(
+                "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+                &[],
+            )
+            .map_err(db)?
+            .get(0);
+        if at != known {
+            return Err(Error::Corrupt {
+                backend: BACKEND,
+                what: format!("schema version {at}, this build expects {known}"),
+            });
+        }
+        let invalid: Vec<String> = client
+            .query(
+                "SELECT c.relname::text FROM pg_index i JOIN pg_class c ON c.oid = i.indexrelid \
+                 JOIN pg_class t ON t.oid = i.indrelid \
+                 WHERE t.relname IN ('catalog_sites', 'catalog_seen') \
+                 AND NOT (i.indisvalid AND i.indisready)",
+                &[],
+            )
+            .map_err(db)?
+            .iter()
+            .map(|r| r.get(0))
+            .collect();
+        if !invalid.is_empty() {
+            return Err(Error::Corrupt {
+                backend: BACKEND,
+                what: format!("invalid indexes: {}", invalid.join(", ")),
+            });
+        }
+        Ok(())
+    }
+}
+
+struct PgTx<'a, 'b> {
+    tx: &'a mut Transaction<'b>,
+}
+
+impl WriteTx for PgTx<'_, '_> {
+    fn confirmed_in(&mut self, b: &Bbox) -> Result<Vec<Site>> {
+        let rows = self
+            .tx
+            .query(
+                &format!(
+                    "SELECT {SITE_COLUMNS} FROM catalog_sites WHERE kind = 0 \
+                     AND bbox && ST_MakeEnvelope($1, $2, $3, $4, 4326)"
+                ),
+                &[&b.min_lon, &b.min_lat, &b.max_lon, &b.max_lat],
+            )
+            .map_err(db)?;
+        rows.iter().map(site_from_row).collect()
+    }
+
+    fn seen_after(&mut self, b: &Bbox, t: Timestamp) -> Result<Vec<(Timestamp, Polygon)>> {
+        let rows = self
+            .tx
+            .query(
+                "SELECT observed_ms, ST_AsGeoJSON(area, 15) FROM catalog_seen \
+                 WHERE observed_ms > $5 AND bbox && ST_MakeEnvelope($1, $2, $3, $4, 4326)",
+                &[&b.min_lon, &b.min_lat, &b.max_lon, &b.max_lat, &t.unix_ms()],
+            )
+            .map_err(db)?;
+        rows.iter()
+            .map(|r| Ok((Timestamp::from_unix_ms(r.get(0)), parse_polygon(r.get(1))?)))
+            .collect()
+    }
+
+    fn insert(&mut self, s: &Site) -> Result<SiteId> {
+        let b = s.bbox();
+        let row = self
+            .tx
+            .query_one(
+                "INSERT INTO catalog_sites (kind, polygon, center, bbox, safe_radius_m, \
+                 plane_height_m, area_m2, first_seen_ms, last_confirmed_ms, frames, approaches, \
+                 drone_id, approach_id, model_id, source_id) VALUES ($1, \
+                 ST_GeomFromGeoJSON($2)::geography, ST_SetSRID(ST_MakePoint($4, $3), 4326)::geography, \
+                 ST_MakeEnvelope($5, $6, $7, $8, 4326), $9, $10, $11, $12, $13, $14, $15, $16, $17, \
+                 $18, $19) RETURNING id",
+                &[
+                    &kind_code(s.kind),
+                    &polygon_geometry(&s.polygon, false).to_string(),
+                    &s.center.latitude_deg,
+                    &s.center.longitude_deg,
+                    &b.min_lon,
+                    &b.min_lat,
+                    &b.max_lon,
+                    &b.max_lat,
+                    &s.safe_radius_m,
+                    &s.plane_height_m,
+                    &s.area_m2,
+                    &s.first_seen.unix_ms(),
+                    &s.last_confirmed.unix_ms(),
+                    &clamp_i64(s.frames),
+                    &clamp_i64(s.approaches),
+                    &s.drone_id,
+                    &s.approach_id,
+                    &s.model_id,
+                    &s.source_id,
+                ],
+            )
+            .map_err(db)?;
+        Ok(SiteId(row.get(0)))
+    }
+
+    fn update(&mut self, s: &Site) -> Result<()> {
+        let b = s.bbox();
+        self.tx
+            .execute(
+                "UPDATE catalog_sites SET polygon = ST_GeomFromGeoJSON($2)::geography, \
+                 center = ST_SetSRID(ST_MakePoint($4, $3), 4326)::geography, \
+                 bbox = ST_MakeEnvelope($5, $6, $7, $8, 4326), safe_radius_m = $9, \
+                 plane_height_m = $10, area_m2 = $11, first_seen_ms = $12, last_confirmed_ms = $13, \
+                 frames = $14, approaches = $15, drone_id = $16, approach_id = $17, model_id = $18 \
+                 WHERE id = $1",
+                &[
+                    &s.id.0,
+                    &polygon_geometry(&s.polygon, false).to_string(),
+                    &s.center.latitude_deg,
+                    &s.center.longitude_deg,
+                    &b.min_lon,
+                    &b.min_lat,
+                    &b.max_lon,
+                    &b.max_lat,
+                    &s.safe_radius_m,
+                    &s.plane_height_m,
+                    &s.area_m2,
+                    &s.first_seen.unix_ms(),
+                    &s.last_confirmed.unix_ms(),
+                    &clamp_i64(s.frames),
+                    &clamp_i64(s.approaches),
+                    &s.drone_id,
+                    &s.approach_id,
+                    &s.model_id,
+                ],
+            )
+            .map_err(db)?;
+        Ok(())
+    }
+
+    fn delete(&mut self, id: SiteId) -> Result<()> {
+        self.tx
+            .execute("DELETE FROM catalog_sites WHERE id = $1", &[&id.0])
+            .map_err(db)?;
+        Ok(())
+    }
+
+    fn record_seen(&mut self, t: Timestamp, area: &Polygon) -> Result<()> {
+        let b = area.bbox();
+        self.tx
+            .execute(
+                "INSERT INTO catalog_seen (observed_ms, area, bbox) VALUES ($1, \
+                 ST_GeomFromGeoJSON($2)::geography, ST_MakeEnvelope($3, $4, $5, $6, 4326))",
+                &[
+                    &t.unix_ms(),
+                    &polygon_geometry(area, false).to_string(),
+                    &b.min_lon,
+                    &b.min_lat,
+                    &b.max_lon,
+                    &b.max_lat,
+                ],
+            )
+            .map_err(db)?;
+        Ok(())
+    }
+}
+
+fn migrate(client: &mut Client) -> Result<()> {
+    let mut tx = client.transaction().map_err(db)?;
+    tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK])
+        .map_err(db)?;
+    tx.batch_execute(
+        "CREATE TABLE IF NOT EXISTS catalog_schema_version (version INTEGER NOT NULL)",
+    )
+    .map_err(db)?;
+    let at: i32 = tx
+        .query_one(
+            "SELECT COALESCE(MAX(version), 0) FROM catalog_schema_version",
+            &[],
+        )
+        .map_err(db)?
+        .get(0);
+    let known = MIGRATIONS.len() as i32;
+    if at > known {
+        return Err(Error::Corrupt {
+            backend: BACKEND,
+            what: format!("schema version {at} is newer than this build's {known}"),
+        });
+    }
+    for (i, sql) in MIGRATIONS.iter().enumerate().skip(at.max(0) as usize) {
+        tx.batch_execute(sql).map_err(db)?;
+        tx.execute(
+            "INSERT INTO catalog_schema_version (version) VALUES ($1)",
+            &[&(i as i32 + 1)],
+        )
+        .map_err(db)?;
+    }
+    tx.commit().map_err(db)
+}
+
+fn site_from_row(r: &Row) -> Result<Site> {
+    let kind = match r.get::<_, i16>(1) {
+        0 => SiteKind::Confirmed,
+        _ => SiteKind::Candidate,
+    };
+    Ok(Site {
+        id: SiteId(r.get(0)),
+        kind,
+        polygon: parse_polygon(r.get(2))?,
+        center: LatLon::new(r.get(3), r.get(4)),
+        safe_radius_m: r.get(5),
+        plane_height_m: r.get(6),
+        area_m2: r.get(7),
+        first_seen: Timestamp::from_unix_ms(r.get(8)),
+        last_confirmed: Timestamp::from_unix_ms(r.get(9)),
+        frames: r.get::<_, i64>(10).max(0) as u64,
+        approaches: r.get::<_, i64>(11).max(0) as u64,
+        drone_id: r.get(12),
+        approach_id: r.get(13),
+        model_id: r.get(14),
+        source_id: r.get(15),
+    })
+}
+
+fn parse_polygon(text: &str) -> Result<Polygon> {
+    let corrupt = |what: String| Error::Corrupt {
+        backend: BACKEND,
+        what,
+    };
+    let v: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
+    polygon_from_coordinates(&v["coordinates"], "polygon")
+        .map_err(|e| corrupt(format!("a stored polygon: {e}")))
+}
+
+fn kind_code(kind: SiteKind) -> i16 {
+    match kind {
+        SiteKind::Confirmed => 0,
+        SiteKind::Candidate => 1,
+    }
+}
+
+fn clamp_i64(n: u64) -> i64 {
+    i64::try_from(n).unwrap_or(i64::MAX)
+}
+
+fn disconnected() -> Error {
+    Error::Storage {
+        backend: BACKEND,
+        source: "no connection to the database".into(),
+    }
+}
+
+fn db(e: postgres::Error) -> Error {
+    Error::Storage {
+        backend: BACKEND,
+        source: Box::new(e),
+    }
+}

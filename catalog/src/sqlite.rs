@@ -1,0 +1,578 @@
+//! The embedded store: one SQLite file (WAL), sites indexed by an R*Tree over their boxes.
+//!
+//! # Schema (version 1)
+//!
+//! ```sql
+//! schema_version(version INTEGER)                   -- one row per applied migration
+//! sites(id INTEGER PRIMARY KEY, kind INTEGER,       -- 0 confirmed, 1 candidate
+//!       polygon TEXT,                               -- GeoJSON Polygon geometry
+//!       latitude_deg REAL, longitude_deg REAL,      -- the safest point
+//!       safe_radius_m REAL, plane_height_m REAL, area_m2 REAL,
+//!       first_seen_ms INTEGER, last_confirmed_ms INTEGER, frames INTEGER, approaches INTEGER,
+//!       drone_id TEXT, approach_id TEXT, model_id TEXT, source_id TEXT UNIQUE)
+//! sites_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon)  -- polygon ∪ safe circle
+//! seen(id INTEGER PRIMARY KEY, observed_ms INTEGER, polygon TEXT)   -- areas observations resolved
+//! seen_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon)
+//! ```
+//!
+//! The R*Tree keeps 32-bit boxes rounded outward and has no nearest-k, so a search asks it for the
+//! boxes meeting the search circle's box (padded), then measures, filters and orders in Rust.
+//! Writes take SQLite's write lock at `BEGIN IMMEDIATE`; other connections wait for it up to the
+//! busy timeout (5 s). WAL with `synchronous = NORMAL`: a process killed mid-write loses at most
+//! the transaction in flight (one `apply` batch); a power cut may also lose the last few commits.
+
+use std::path::Path;
+use std::sync::{Mutex, MutexGuard};
+use std::time::Duration;
+
+use rusqlite::{Connection, OptionalExtension, Row, Transaction, TransactionBehavior, params};
+
+use crate::apply::{BOX_PAD_M, WriteTx, apply_sorted, validate};
+use crate::error::{Error, Result};
+use crate::geo::{Bbox, LatLon, Polygon, distance_m};
+use crate::geojson::{polygon_from_coordinates, polygon_geometry};
+use crate::model::{Candidate, Observation, Site, SiteId, SiteKind};
+use crate::query::{Found, Resolved, SearchPage, SearchQuery, order_group};
+use crate::rule::ApplyReport;
+use crate::store::{Counts, Store};
+use crate::time::Timestamp;
+
+const BACKEND: &str = "sqlite";
+
+/// How long a write waits for another connection's write lock.
+pub const BUSY_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// The migrations, in order: the schema is at version `MIGRATIONS.len()`.
+const MIGRATIONS: &[&str] = &[r#"
+CREATE TABLE sites (
+    id INTEGER PRIMARY KEY,
+    kind INTEGER NOT NULL CHECK (kind IN (0, 1)),
+    polygon TEXT NOT NULL,
+    latitude_deg REAL NOT NULL,
+    longitude_deg REAL NOT NULL,
+    safe_radius_m REAL NOT NULL,
+    plane_height_m REAL NOT NULL,
+    area_m2 REAL NOT NULL,
+    first_seen_ms INTEGER NOT NULL,
+    last_confirmed_ms INTEGER NOT NULL,
+    frames INTEGER NOT NULL,
+    approaches INTEGER NOT NULL,
+    drone_id TEXT NOT NULL,
+    approach_id TEXT NOT NULL,
+    model_id TEXT NOT NULL,
+    source_id TEXT UNIQUE
+);
+CREATE INDEX sites_kind_last_confirmed ON sites (kind, last_confirmed_ms);
+CREATE VIRTUAL TABLE sites_rtree USING rtree (id, min_lat, max_lat, min_lon, max_lon);
+CREATE TABLE seen (
+    id INTEGER PRIMARY KEY,
+    observed_ms INTEGER NOT NULL,
+    polygon TEXT NOT NULL
+);
+CREATE INDEX seen_observed ON seen (observed_ms);
+CREATE VIRTUAL TABLE seen_rtree USING rtree (id, min_lat, max_lat, min_lon, max_lon);
+"#];
+
+const SITE_COLUMNS: &str = "s.id, s.kind, s.polygon, s.latitude_deg, s.longitude_deg, \
+    s.safe_radius_m, s.plane_height_m, s.area_m2, s.first_seen_ms, s.last_confirmed_ms, s.frames, \
+    s.approaches, s.drone_id, s.approach_id, s.model_id, s.source_id";
+
+/// The catalog in one SQLite file.
+#[derive(Debug)]
+pub struct SqliteStore {
+    conn: Mutex<Connection>,
+}
+
+impl SqliteStore {
+    /// Opens (creating when missing) the catalog file at `path`: WAL, busy timeout, migrations.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        let conn = Connection::open(path).map_err(db)?;
+        Self::with_connection(conn)
+    }
+
+    /// A catalog in memory, gone when dropped (tests, examples).
+    pub fn open_in_memory() -> Result<Self> {
+        Self::with_connection(Connection::open_in_memory().map_err(db)?)
+    }
+
+    fn with_connection(mut conn: Connection) -> Result<Self> {
+        conn.busy_timeout(BUSY_TIMEOUT).map_err(db)?;
+        // In memory the journal stays "memory"; on disk it becomes "wal".
+        let _mode: String = conn
+            .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))
+            .map_err(db)?;
+        conn.execute_batch("PRAGMA synchronous = NORMAL;")
+            .map_err(db)?;
+        migrate(&mut conn)?;
+        Ok(SqliteStore {
+            conn: Mutex::new(conn),
+        })
+    }
+
+    /// The schema version the file is at.
+    pub fn schema_version(&self) -> Result<u32> {
+        let conn = self.lock();
+        conn.query_row(
+            "SELECT COALESCE(MAX(version), 0) FROM schema_version",
+            [],
+            |r| r.get(0),
+        )
+        .map_err(db)
+    }
+
+    fn lock(&self) -> MutexGuard<'_, Connection> {
+        // A panic while holding the lock left no transaction open (rusqlite rolls back on drop).
+        self.conn.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+impl Store for SqliteStore {
+    fn backend(&self) -> &'static str {
+        BACKEND
+    }
+
+    fn apply(&self, batch: &[Observation]) -> Result<ApplyReport> {
+        let sorted = validate(batch)?;
+        let mut conn = self.lock();
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
+        let report = apply_sorted(&mut SqliteTx { tx: &tx }, &sorted)?;
+        tx.commit().map_err(db)?;
+        Ok(report)
+    }
+
+    fn search(&self, query: &SearchQuery, now: Timestamp) -> Result<SearchPage> {
+        let r = Resolved::new(query, now)?;
+        let conn = self.lock();
+        let bbox = Bbox::around(r.center, r.radius_m).padded_m(BOX_PAD_M);
+        r.page(&mut |r, kind, after, limit| {
+            let kind_code = kind_code(kind);
+            // Candidates have no age; confirmed sites older than the cut-off are left out here.
+            let cutoff = match kind {
+                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+                SiteKind::Candidate => i64::MIN,
+            };
+            // First the few columns that filter and order, for every box the R*Tree returns;
+            // then whole records (polygons parsed) for the page alone.
+            let mut stmt = conn
+                .prepare_cached(
+                    "SELECT s.id, s.latitude_deg, s.longitude_deg, s.safe_radius_m, \
+                     s.last_confirmed_ms FROM sites_rtree t JOIN sites s ON s.id = t.id \
+                     WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 \
+                     AND t.min_lon <= ?4 AND s.kind = ?5 AND s.safe_radius_m >= ?6 \
+                     AND s.last_confirmed_ms >= ?7",
+                )
+                .map_err(db)?;
+            let rows = stmt
+                .query_map(
+                    params![
+                        bbox.min_lat,
+                        bbox.max_lat,
+                        bbox.min_lon,
+                        bbox.max_lon,
+                        kind_code,
+                        r.min_safe_radius_m,
+                        cutoff
+                    ],
+                    |row| {
+                        Ok(Site {
+                            id: SiteId(row.get(0)?),
+                            kind,
+                            polygon: Polygon::default(),
+                            center: LatLon::new(row.get(1)?, row.get(2)?),
+                            safe_radius_m: row.get(3)?,
+                            plane_height_m: 0.0,
+                            area_m2: 0.0,
+                            first_seen: Timestamp::default(),
+                            last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
+                            frames: 0,
+                            approaches: 0,
+                            drone_id: String::new(),
+                            approach_id: String::new(),
+                            model_id: String::new(),
+                            source_id: None,
+                        })
+                    },
+                )
+                .map_err(db)?;
+            let mut all = Vec::new();
+            for row in rows {
+                let site = row.map_err(db)?;
+                let distance_m = distance_m(r.center, site.center);
+                if r.admits(&site, distance_m) {
+                    all.push(Found { site, distance_m });
+                }
+            }
+            let mut page = order_group(r, all, after, limit);
+            let mut whole = conn
+                .prepare_cached(&format!(
+                    "SELECT {SITE_COLUMNS} FROM sites s WHERE s.id = ?1"
+                ))
+                .map_err(db)?;
+            for f in &mut page {
+                f.site = whole
+                    .query_row([f.site.id.0], site_from_row)
+                    .map_err(db)??;
+            }
+            Ok(page)
+        })
+    }
+
+    fn expire(&self, now: Timestamp, retention: Duration) -> Result<u64> {
+        let cutoff = now.saturating_sub(retention).unix_ms();
+        let mut conn = self.lock();
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
+        tx.execute(
+            "DELETE FROM sites_rtree WHERE id IN \
+             (SELECT id FROM sites WHERE kind = 0 AND last_confirmed_ms < ?1)",
+            [cutoff],
+        )
+        .map_err(db)?;
+        let n = tx
+            .execute(
+                "DELETE FROM sites WHERE kind = 0 AND last_confirmed_ms < ?1",
+                [cutoff],
+            )
+            .map_err(db)?;
+        tx.execute(
+            "DELETE FROM seen_rtree WHERE id IN (SELECT id FROM seen WHERE observed_ms < ?1)",
+            [cutoff],
+        )
+        .map_err(db)?;
+        tx.execute("DELETE FROM seen WHERE observed_ms < ?1", [cutoff])
+            .map_err(db)?;
+        tx.commit().map_err(db)?;
+        Ok(n as u64)
+    }
+
+    fn import_candidates(&self, candidates: &[Candidate], now: Timestamp) -> Result<u64> {
+        for (i, c) in candidates.iter().enumerate() {
+            c.validate(&format!("candidates[{i}]"))?;
+        }
+        let mut conn = self.lock();
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
+        let mut w = SqliteTx { tx: &tx };
+        for c in candidates {
+            if let Some(src) = &c.source_id {
+                let old: Option<i64> = tx
+                    .query_row("SELECT id FROM sites WHERE source_id = ?1", [src], |r| {
+                        r.get(0)
+                    })
+                    .optional()
+                    .map_err(db)?;
+                if let Some(old) = old {
+                    w.delete(SiteId(old))?;
+                }
+            }
+            w.insert(&c.to_site(now))?;
+        }
+        tx.commit().map_err(db)?;
+        Ok(candidates.len() as u64)
+    }
+
+    fn counts(&self) -> Result<Counts> {
+        let conn = self.lock();
+        let count = |sql: &str| -> Result<u64> {
+            conn.query_row(sql, [], |r| r.get::<_, i64>(0))
+                .map(|n| n as u64)
+                .map_err(db)
+        };
+        Ok(Counts {
+            confirmed: count("SELECT COUNT(*) FROM sites WHERE kind = 0")?,
+            candidates: count("SELECT COUNT(*) FROM sites WHERE kind = 1")?,
+            seen_areas: count("SELECT COUNT(*) FROM seen")?,
+        })
+    }
+
+    fn check_integrity(&self) -> Result<()> {
+        let conn = self.lock();
+        let mut stmt = conn.prepare("PRAGMA integrity_check").map_err(db)?;
+        let lines: Vec<String> = stmt
+            .query_map([], |r| r.get(0))
+            .map_err(db)?
+            .collect::<Result<_, _>>()
+            .map_err(db)?;
+        if lines != ["ok"] {
+            return Err(Error::Corrupt {
+                backend: BACKEND,
+                what: lines.join("; "),
+            });
+        }
+        for table in ["sites_rtree", "seen_rtree"] {
+            let verdict: String = conn
+                .query_row(&format!("SELECT rtreecheck('{table}')"), [], |r| r.get(0))
+                .map_err(db)?;
+            if verdict != "ok" {
+                return Err(Error::Corrupt {
+                    backend: BACKEND,
+                    what: format!("{table}: {verdict}"),
+                });
+            }
+        }
+        for (table, index) in [("sites", "sites_rtree"), ("seen", "seen_rtree")] {
+            let missing: i64 = conn
+                .query_row(
+                    &format!(
+                        "SELECT (SELECT COUNT(*) FROM {table}) - (SELECT COUNT(*) FROM {index})"
+                    ),
+                    [],
+                    |r| r.get(0),
+                )
+                .map_err(db)?;
+            if missing != 0 {
+                return Err(Error::Corrupt {
+                    backend: BACKEND,
+                    what: format!("{table} and {index} differ by {missing} rows"),
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+struct SqliteTx<'a> {
+    tx: &'a Transaction<'a>,
+}
+
+impl WriteTx for SqliteTx<'_> {
+    fn confirmed_in(&mut self, b: &Bbox) -> Result<Vec<Site>> {
+        let mut stmt = self
+            .tx
+            .prepare_cached(&format!(
+                "SELECT {SITE_COLUMNS} FROM sites_rtree t JOIN sites s ON s.id = t.id \
+                 WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 AND t.min_lon <= ?4 \
+                 AND s.kind = 0"
+            ))
+            .map_err(db)?;
+        let rows = stmt
+            .query_map(
+                params![b.min_lat, b.max_lat, b.min_lon, b.max_lon],
+                site_from_row,
+            )
+            .map_err(db)?;
+        rows.map(|r| r.map_err(db)?).collect()
+    }
+
+    fn seen_after(&mut self, b: &Bbox, t: Timestamp) -> Result<Vec<(Timestamp, Polygon)>> {
+        let mut stmt = self
+            .tx
+            .prepare_cached(
+                "SELECT s.observed_ms, s.polygon FROM seen_rtree t JOIN seen s ON s.id = t.id \
+                 WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 AND t.min_lon <= ?4 \
+                 AND s.observed_ms > ?5",
+            )
+            .map_err(db)?;
+        let rows = stmt
+            .query_map(
+                params![b.min_lat, b.max_lat, b.min_lon, b.max_lon, t.unix_ms()],
+                |r| Ok((r.get::<_, i64>(0)?, r.get::<_, String>(1)?)),
+            )
+            .map_err(db)?;
+        let mut out = Vec::new();
+        for row in rows {
+            let (ms, text) = row.map_err(db)?;
+            out.push((Timestamp::from_unix_ms(ms), parse_polygon(&text)?));
+        }
+        Ok(out)
+    }
+
+    fn insert(&mut self, s: &Site) -> Result<SiteId> {
+        self.tx
+            .prepare_cached(
+                "INSERT INTO sites (kind, polygon, latitude_deg, longitude_deg, safe_radius_m, \
+                 plane_height_m, area_m2, first_seen_ms, last_confirmed_ms, frames, approaches, \
+                 drone_id, approach_id, model_id, source_id) \
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15)",
+            )
+            .map_err(db)?
+            .execute(params![
+                kind_code(s.kind),
+                polygon_geometry(&s.polygon, false).to_string(),
+                s.center.latitude_deg,
+                s.center.longitude_deg,
+                s.safe_radius_m,
+                s.plane_height_m,
+                s.area_m2,
+                s.first_seen.unix_ms(),
+                s.last_confirmed.unix_ms(),
+                clamp_i64(s.frames),
+                clamp_i64(s.approaches),
+                s.drone_id,
+                s.approach_id,
+                s.model_id,
+                s.source_id,
+            ])
+            .map_err(db)?;
+        let id = self.tx.last_insert_rowid();
+        self.index("sites_rtree", id, &s.bbox())?;
+        Ok(SiteId(id))
+    }
+
+    fn update(&mut self, s: &Site) -> Result<()> {
+        self.tx
+            .prepare_cached(
+                "UPDATE sites SET polygon = ?2, latitude_deg = ?3, longitude_deg = ?4, \
+                 safe_radius_m = ?5, plane_height_m = ?6, area_m2 = ?7, first_seen_ms = ?8, \
+                 last_confirmed_ms = ?9, frames = ?10, approaches = ?11, drone_id = ?12, \
+                 approach_id = ?13, model_id = ?14 WHERE id = ?1",
+            )
+            .map_err(db)?
+            .execute(params![
+                s.id.0,
+                polygon_geometry(&s.polygon, false).to_string(),
+                s.center.latitude_deg,
+                s.center.longitude_deg,
+                s.safe_radius_m,
+                s.plane_height_m,
+                s.area_m2,
+                s.first_seen.unix_ms(),
+                s.last_confirmed.unix_ms(),
+                clamp_i64(s.frames),
+                clamp_i64(s.approaches),
+                s.drone_id,
+                s.approach_id,
+                s.model_id,
+            ])
+            .map_err(db)?;
+        self.tx
+            .prepare_cached("DELETE FROM sites_rtree WHERE id = ?1")
+            .map_err(db)?
+            .execute([s.id.0])
+            .map_err(db)?;
+        self.index("sites_rtree", s.id.0, &s.bbox())
+    }
+
+    fn delete(&mut self, id: SiteId) -> Result<()> {
+        self.tx
+            .prepare_cached("DELETE FROM sites WHERE id = ?1")
+            .map_err(db)?
+            .execute([id.0])
+            .map_err(db)?;
+        self.tx
+            .prepare_cached("DELETE FROM sites_rtree WHERE id = ?1")
+            .map_err(db)?
+            .execute([id.0])
+            .map_err(db)?;
+        Ok(())
+    }
+
+    fn record_seen(&mut self, t: Timestamp, area: &Polygon) -> Result<()> {
+        self.tx
+            .prepare_cached("INSERT INTO seen (observed_ms, polygon) VALUES (?1, ?2)")
+            .map_err(db)?
+            .execute(params![
+                t.unix_ms(),
+                polygon_geometry(area, false).to_string()
+            ])
+            .map_err(db)?;
+        let id = self.tx.last_insert_rowid();
+        self.index("seen_rtree", id, &area.bbox())
+    }
+}
+
+impl SqliteTx<'_> {
+    fn index(&self, table: &str, id: i64, b: &Bbox) -> Result<()> {
+        self.tx
+            .prepare_cached(&format!(
+                "INSERT INTO {table} (id, min_lat, max_lat, min_lon, max_lon) VALUES (?1, ?2, ?3, ?4, ?5)"
+            ))
+            .map_err(db)?
+            .execute(params![id, b.min_lat, b.max_lat, b.min_lon, b.max_lon])
+            .map_err(db)?;
+        Ok(())
+    }
+}
+
+fn migrate(conn: &mut Connection) -> Result<()> {
+    let tx = conn
+        .transaction_with_behavior(TransactionBehavior::Immediate)
+        .map_err(db)?;
+    tx.execute_batch("CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL)")
+        .map_err(db)?;
+    let at: i64 = tx
+        .query_row(
+            "SELECT COALESCE(MAX(version), 0) FROM schema_version",
+            [],
+            |r| r.get(0),
+        )
+        .map_err(db)?;
+    let known = MIGRATIONS.len() as i64;
+    if at > known {
+        return Err(Error::Corrupt {
+            backend: BACKEND,
+            what: format!("schema version {at} is newer than this build's {known}"),
+        });
+    }
+    for (i, sql) in MIGRATIONS.iter().enumerate().skip(at as usize) {
+        tx.execute_batch(sql).map_err(db)?;
+        tx.execute(
+            "INSERT INTO schema_version (version) VALUES (?1)",
+            [i as i64 + 1],
+        )
+        .map_err(db)?;
+    }
+    tx.commit().map_err(db)
+}
+
+fn site_from_row(r: &Row<'_>) -> rusqlite::Result<Result<Site>> {
+    let kind = match r.get::<_, i64>(1)? {
+        0 => SiteKind::Confirmed,
+        _ => SiteKind::Candidate,
+    };
+    let polygon_text: String = r.get(2)?;
+    let polygon = match parse_polygon(&polygon_text) {
+        Ok(p) => p,
+        Err(e) => return Ok(Err(e)),
+    };
+    Ok(Ok(Site {
+        id: SiteId(r.get(0)?),
+        kind,
+        polygon,
+        center: LatLon::new(r.get(3)?, r.get(4)?),
+        safe_radius_m: r.get(5)?,
+        plane_height_m: r.get(6)?,
+        area_m2: r.get(7)?,
+        first_seen: Timestamp::from_unix_ms(r.get(8)?),
+        last_confirmed: Timestamp::from_unix_ms(r.get(9)?),
+        frames: r.get::<_, i64>(10)?.max(0) as u64,
+        approaches: r.get::<_, i64>(11)?.max(0) as u64,
+        drone_id: r.get(12)?,
+        approach_id: r.get(13)?,
+        model_id: r.get(14)?,
+        source_id: r.get(15)?,
+    }))
+}
+
+fn parse_polygon(text: &str) -> Result<Polygon> {
+    let corrupt = |what: String| Error::Corrupt {
+        backend: BACKEND,
+        what,
+    };
+    let v: serde_json::Value =
+        serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
+    polygon_from_coordinates(&v["coordinates"], "polygon")
+        .map_err(|e| corrupt(format!("a stored polygon: {e}")))
+}
+
+fn kind_code(kind: SiteKind) -> i64 {
+    match kind {
+        SiteKind::Confirmed => 0,
+        SiteKind::Candidate => 1,
+    }
+}
+
+fn clamp_i64(n: u64) -> i64 {
+    i64::try_from(n).unwrap_or(i64::MAX)
+}
+
+fn db(e: rusqlite::Error) -> Error {
+    Error::Storage {
+        backend: BACKEND,
+        source: Box::new(e),
+    }
+}
