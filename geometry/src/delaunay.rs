@@ -600,24 +600,23 @@ impl<'a> Builder<'a> {
     }
 }
 
+/// spade's triangulation, to cross-check ours.
+#[cfg(test)]
+#[path = "../tests/support/spade.rs"]
+mod spade_support;
+
 #[cfg(test)]
 mod tests {
+    use super::spade_support::triangulate_spade;
     use super::*;
     use crate::synthetic::Pcg32;
-    use crate::triangulation::{TriangulationConfig, Triangulator, triangulate as any};
 
     fn check_deferring(points: &[[f64; 3]], defer: impl Fn(usize) -> bool, what: &str) {
         let ours = triangulate_deferring(points, defer).unwrap_or_else(|e| panic!("{what}: {e}"));
         let xy: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
         ours.check_invariants(&xy, true)
             .unwrap_or_else(|e| panic!("{what}: {e}"));
-        let spade = any(
-            points,
-            &TriangulationConfig {
-                triangulator: Triangulator::Spade,
-            },
-        )
-        .unwrap();
+        let spade = triangulate_spade(points);
         assert_eq!(ours.len(), spade.len(), "{what}");
     }
 

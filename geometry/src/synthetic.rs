@@ -9,7 +9,7 @@
 //! The generator is a local PCG so a seed gives bit-identical scenes on every run, platform and
 //! dependency version.
 
-use crate::SemanticClass;
+use crate::{CloudKind, SemanticClass};
 
 /// What to generate; `Default` is a 20 m × 20 m roof 10 m up with three obstacles, ~1500 points
 /// (the paper's average frame).
@@ -420,11 +420,10 @@ mod tests {
 /// finds replay in this crate's tests: 8 bytes pick parameters within the ranges the API
 /// accepts, then 13 bytes a point (f32 x, y, z; a class), at most `max_points` points; points
 /// with a non-finite coordinate or one beyond 1e7 m are skipped, as the service refuses them.
-/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd,
-/// pinholes are closed when the 8th is, and polygons end at midpoints when the 8th byte's
-/// second bit is set (its top six bits give the limit, up to 5 m). When the 7th byte's second
-/// bit is set, the first 8 points also stand for keep-out disks (radius from the class byte, up
-/// to 2 m) and its top six bits give `keep_out_trust_edge_m` (0 to 5 m).
+/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd, and the
+/// first 8 points also stand for keep-out disks (radius from the class byte, up to 2 m) when its
+/// second bit is set. The cloud is a [`CloudKind::FusedMap`] when the 8th byte is odd, of cells
+/// from 0.025 to 2.5 m (its top six bits), a [`CloudKind::Scan`] otherwise.
 pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
     let (head, body) = data.split_first_chunk::<8>()?;
     let unit = |b: u8| f64::from(b) / 255.0;
@@ -436,18 +435,14 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         polylabel_precision_m: 0.01 + unit(head[3]) * 2.0,
         min_region_triangles: usize::from(head[4] % 16),
         max_sites: usize::from(head[5] % 8) + 1,
-        close_pinholes: head[7] & 1 == 1,
-        midpoint_max_edge_m: if head[7] & 2 == 2 {
-            0.05 + f64::from(head[7] >> 2) / 63.0 * 5.0
-        } else {
-            0.0
-        },
-        keep_out_trust_edge_m: if with_disks {
-            f64::from(head[6] >> 2) / 63.0 * 5.0
-        } else {
-            0.0
-        },
         ..crate::Params::default()
+    };
+    let kind = if head[7] & 1 == 1 {
+        CloudKind::FusedMap {
+            cell_m: 0.025 + f64::from(head[7] >> 2) / 63.0 * 2.475,
+        }
+    } else {
+        CloudKind::Scan
     };
     let mut points = Vec::new();
     let mut classes = Vec::new();
@@ -470,6 +465,7 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         points,
         disks,
         classes: (head[6] & 1 == 1).then_some(classes),
+        kind,
         params,
     })
 }
@@ -478,8 +474,9 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectInput {
     pub points: Vec<[f32; 3]>,
-    /// Keep-out disks for every plane ([`crate::detect_keeping_out`]); none for [`crate::detect`].
+    /// Keep-out disks for every plane ([`crate::Cloud::keep_clear`]), when not empty.
     pub disks: Vec<crate::Disk>,
     pub classes: Option<Vec<u8>>,
+    pub kind: CloudKind,
     pub params: crate::Params,
 }
