@@ -1,7 +1,9 @@
 //! The in-process pipeline: one validated frame in, ranked landing sites in world coordinates out.
 //!
-//! Synchronous and free of tonic types: the service calls [`run_pipeline`] on its worker pool,
-//! and tests and benchmarks call it directly to compare with what the service answers.
+//! Synchronous and free of tonic types: the service calls [`run_pipeline`] (a frame judged alone)
+//! or [`run_fused`] (a fused stream's frame, with the stream's map; its steps in `fused.rs`) on
+//! its worker pool, and tests and benchmarks call them directly to compare with what the service
+//! answers.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
