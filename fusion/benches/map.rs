@@ -8,7 +8,7 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use landing_fusion::{FusionMap, FusionParams, Scan, View};
 use landing_geometry::triangulation::triangulate;
-use landing_geometry::{Params, TriangulationConfig, detect};
+use landing_geometry::{Cloud, Params, detect};
 
 const ROOFTOP: u8 = 4;
 const AIR_VENT: u8 = 10;
@@ -107,14 +107,13 @@ fn bench(c: &mut Criterion) {
     g.bench_function("detect on the fused points", |b| {
         b.iter(|| {
             black_box(detect(
-                &points,
-                fused.classes.as_deref(),
+                &Cloud::new(&points, fused.classes.as_deref()),
                 &Params::default(),
             ))
         })
     });
     g.bench_function("triangulation alone", |b| {
-        b.iter(|| black_box(triangulate(&wide, &TriangulationConfig::default())))
+        b.iter(|| black_box(triangulate(&wide)))
     });
     g.finish();
 }

@@ -33,6 +33,10 @@
 //! jumps, time goes backwards or the caller asks. It is plain synchronous code with no I/O: the
 //! server owns one per stream and drops it with the stream.
 //!
+//! The surface's points lie a cell or two apart, far denser than a scan's: the geometry reads
+//! them as `landing_geometry::CloudKind::FusedMap` (pinholes closed, polygons to midpoints,
+//! keep-out footprints trusted only over gaps), explained there.
+//!
 //! ```
 //! use landing_fusion::{FusionMap, FusionParams, Scan};
 //!

@@ -1,11 +1,11 @@
-//! `landing_geometry::detect` (or `detect_keeping_out`, with keep-out disks) on arbitrary finite
-//! points, classes and parameters: an answer or an error, never a panic, and every answer
+//! `landing_geometry::detect` on arbitrary finite points, classes, keep-out disks, cloud kinds and
+//! parameters: an answer or an error, never a panic, and every answer
 //! passes the validity checks (OGC-valid polygons, centres inside them, ranked). The bytes are decoded by
 //! `landing_geometry::synthetic::fuzz_detect_input`, so that finds replay in that crate's tests.
 #![no_main]
 
 use landing_geometry::synthetic::fuzz_detect_input;
-use landing_geometry::{KeepClear, detect, detect_keeping_out, validation::check_detection};
+use landing_geometry::{Cloud, KeepClear, KeepOut, detect, validation::check_detection};
 use libfuzzer_sys::fuzz_target;
 
 /// Points the geometry sees from one input at most (a frame has tens of thousands; the fuzzer
@@ -16,17 +16,15 @@ fuzz_target!(|data: &[u8]| {
     let Some(input) = fuzz_detect_input(data, MAX_POINTS) else {
         return;
     };
-    let classes = input.classes.as_deref();
-    let result = if input.disks.is_empty() {
-        detect(&input.points, classes, &input.params)
-    } else {
-        let disks = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| input.disks.clone();
-        let keep_clear = KeepClear {
-            disks: Some(&disks),
-            points: None,
-        };
-        detect_keeping_out(&input.points, classes, &input.params, keep_clear)
+    let disks = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| input.disks.clone();
+    let keep_clear = KeepClear {
+        disks: (!input.disks.is_empty()).then_some(&disks as &dyn KeepOut),
+        points: None,
     };
+    let cloud = Cloud::new(&input.points, input.classes.as_deref())
+        .with_kind(input.kind)
+        .with_keep_clear(keep_clear);
+    let result = detect(&cloud, &input.params);
     if let Ok(detection) = result {
         check_detection(&detection).expect("a valid detection");
     }

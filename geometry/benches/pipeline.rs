@@ -14,11 +14,11 @@ use landing_geometry::filter::{FilterParams, filter_triangles};
 use landing_geometry::ranking::{RankingParams, rank_sites};
 use landing_geometry::regions::{RegionParams, extract_regions};
 use landing_geometry::synthetic::{Scene, SceneParams};
-use landing_geometry::triangulation::triangulate;
-use landing_geometry::{
-    Disk, KeepClear, Params, StepTimings, TriangulationConfig, Triangulator, detect,
-    detect_keeping_out,
-};
+use landing_geometry::triangulation::{EMPTY, Triangulation, triangulate};
+use landing_geometry::{Cloud, CloudKind, Disk, KeepClear, Params, StepTimings, detect};
+
+#[path = "../tests/support/spade.rs"]
+mod spade;
 
 const SIZES: [(usize, &str); 4] = [
     (1_500, "1.5k"),
@@ -54,7 +54,7 @@ fn print_split(label: &str, s: &Scene) {
     let runs = if s.points.len() > 500_000 { 5 } else { 21 };
     let all: Vec<StepTimings> = (0..runs)
         .map(|_| {
-            detect(&s.points, Some(&s.classes), &Params::default())
+            detect(&Cloud::new(&s.points, Some(&s.classes)), &Params::default())
                 .unwrap()
                 .timings
         })
@@ -62,7 +62,7 @@ fn print_split(label: &str, s: &Scene) {
     let batch = (1.0 / all[0].total().as_secs_f64().max(1e-6)).ceil() as usize;
     let before = on_cpu_ns();
     for _ in 0..batch {
-        black_box(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
+        black_box(detect(&Cloud::new(&s.points, Some(&s.classes)), &Params::default()).unwrap());
     }
     let cpu_ms = match (before, on_cpu_ns()) {
         (Some(a), Some(b)) => (b - a) as f64 / 1e6 / batch as f64,
@@ -80,7 +80,7 @@ fn print_split(label: &str, s: &Scene) {
     let label_ms = median(&|t| t.polylabel);
     let total = median(&|t| t.total());
     let rest = filter + planes + polygons + label_ms;
-    let d = detect(&s.points, Some(&s.classes), &Params::default()).unwrap();
+    let d = detect(&Cloud::new(&s.points, Some(&s.classes)), &Params::default()).unwrap();
     eprintln!(
         "split {label:>5} ({} points, {} triangles, {} sites): total {total:.3} ms wall \
          ({cpu_ms:.3} ms on-CPU) = triangulation {tri:.3} + filter {filter:.3} + planes \
@@ -103,22 +103,23 @@ fn benches(c: &mut Criterion) {
         }
         g.measurement_time(Duration::from_secs(if n >= 1_000_000 { 20 } else { 5 }));
         g.bench_function(BenchmarkId::new("detect", label), |b| {
-            b.iter(|| detect(black_box(&s.points), Some(&s.classes), &Params::default()).unwrap())
+            b.iter(|| {
+                detect(
+                    &Cloud::new(black_box(&s.points), Some(&s.classes)),
+                    &Params::default(),
+                )
+                .unwrap()
+            })
         });
-        for (name, which) in [
-            ("triangulate_ours", Triangulator::SweepHull),
-            ("triangulate_spade", Triangulator::Spade),
-        ] {
-            let config = TriangulationConfig {
-                triangulator: which,
-            };
-            g.bench_function(BenchmarkId::new(name, label), |b| {
-                b.iter(|| triangulate(black_box(&pts), &config).unwrap())
-            });
-        }
+        g.bench_function(BenchmarkId::new("triangulate_ours", label), |b| {
+            b.iter(|| triangulate(black_box(&pts)).unwrap())
+        });
+        g.bench_function(BenchmarkId::new("triangulate_spade", label), |b| {
+            b.iter(|| spade::triangulate_spade(black_box(&pts)))
+        });
         // The steps after triangulation, each on the previous step's output.
         let params = Params::default();
-        let tri = triangulate(&pts, &TriangulationConfig::default()).unwrap();
+        let tri = triangulate(&pts).unwrap();
         let filter = FilterParams::from(&params);
         g.bench_function(BenchmarkId::new("step_filter", label), |b| {
             b.iter(|| filter_triangles(black_box(&tri), &pts, Some(&s.classes), &filter))
@@ -151,9 +152,9 @@ fn benches(c: &mut Criterion) {
                 rank_sites(black_box(&regions), polygons.clone(), None, &ranking, None).unwrap()
             })
         });
-        // Keep-out disks of 0.2 m at every 50th point: every one bounding the circles, or only
-        // those over the regions' long-edged triangles (a fused map's setting: two cells, here
-        // two point spacings).
+        // Keep-out disks of 0.2 m at every 50th point: every one bounding the circles (a scan), or
+        // only those over the regions' long-edged triangles (a fused map of cells one point
+        // spacing wide, whose pinholes are closed and polygons end at midpoints too).
         let disks: Vec<Disk> = s
             .points
             .iter()
@@ -164,23 +165,24 @@ fn benches(c: &mut Criterion) {
             })
             .collect();
         let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
-        for (name, trust) in [
-            ("detect_keep_out", 0.0),
-            ("detect_keep_out_trusted", 2.0 * s.spacing_m),
+        for (name, kind) in [
+            ("detect_keep_out", CloudKind::Scan),
+            (
+                "detect_keep_out_fused",
+                CloudKind::FusedMap {
+                    cell_m: s.spacing_m,
+                },
+            ),
         ] {
-            let params = Params {
-                keep_out_trust_edge_m: trust,
-                ..Params::default()
-            };
             let keep_clear = KeepClear {
                 disks: Some(&keep_out),
                 points: None,
             };
+            let cloud = Cloud::new(&s.points, Some(&s.classes))
+                .with_keep_clear(keep_clear)
+                .with_kind(kind);
             g.bench_function(BenchmarkId::new(name, label), |b| {
-                b.iter(|| {
-                    detect_keeping_out(black_box(&s.points), Some(&s.classes), &params, keep_clear)
-                        .unwrap()
-                })
+                b.iter(|| detect(black_box(&cloud), &params).unwrap())
             });
         }
         g.finish();

@@ -323,6 +323,35 @@ impl<'a> Builder<'a> {
     /// nothing) if it does not.
     fn add_outside(&mut self, i: u32) -> Result<bool, GeometryError> {
         let p = self.xy(i);
+        let Some((mut e, start)) = self.first_visible_edge(p)? else {
+            return Ok(false);
+        };
+        let n0 = self.hull_next[e as usize];
+        let t = self.add_triangle(e, i, n0, EMPTY, EMPTY, self.hull_tri[e as usize]);
+        self.hull_tri[i as usize] = t + 1;
+        self.hull_tri[e as usize] = t;
+        self.legalize(t + 2)?;
+        let n = self.wrap_forward(i, n0, p)?;
+        // Hull edges before the first, which are only possible when the first edge tried was
+        // visible.
+        if e == start {
+            e = self.wrap_backward(i, e, p)?;
+        }
+        self.hull_prev[i as usize] = e;
+        self.hull_next[i as usize] = n;
+        self.hull_next[e as usize] = i;
+        self.hull_prev[n as usize] = i;
+        let k = self.hash_key(p);
+        self.hash[k] = i;
+        let k = self.hash_key(self.xy(e));
+        self.hash[k] = e;
+        Ok(true)
+    }
+
+    /// The first hull edge `e → next(e)` that sees `p`, walking from a hull point near `p` in
+    /// the angular hash, and the hull point the walk started at; `None` when no edge sees it (the
+    /// point is inside or on the hull).
+    fn first_visible_edge(&self, p: [f64; 2]) -> Result<Option<(u32, u32)>, GeometryError> {
         let key = self.hash_key(p);
         let size = self.hash.len();
         let mut start = EMPTY;
@@ -344,12 +373,12 @@ impl<'a> Builder<'a> {
         loop {
             let q = self.hull_next[e as usize];
             if orient(self.xy(e), self.xy(q), p) < 0.0 {
-                break;
+                return Ok(Some((e, start)));
             }
             e = q;
             guard += 1;
             if e == start {
-                return Ok(false);
+                return Ok(None);
             }
             if guard > self.points.len() {
                 return Err(GeometryError::IterationLimit {
@@ -358,18 +387,15 @@ impl<'a> Builder<'a> {
                 });
             }
         }
-        let n0 = self.hull_next[e as usize];
-        let t = self.add_triangle(e, i, n0, EMPTY, EMPTY, self.hull_tri[e as usize]);
-        self.hull_tri[i as usize] = t + 1;
-        self.hull_tri[e as usize] = t;
-        self.legalize(t + 2)?;
+    }
 
-        // Hull edges after the first that see the point.
-        let mut n = n0;
+    /// Adds the triangles of point `i` with the hull edges from `n` on that see it (`p`), and
+    /// takes their points off the hull; returns the first hull point that does not see it.
+    fn wrap_forward(&mut self, i: u32, mut n: u32, p: [f64; 2]) -> Result<u32, GeometryError> {
         loop {
             let q = self.hull_next[n as usize];
             if orient(self.xy(n), self.xy(q), p) >= 0.0 {
-                break;
+                return Ok(n);
             }
             let t = self.add_triangle(
                 n,
@@ -384,36 +410,29 @@ impl<'a> Builder<'a> {
             self.hull_next[n as usize] = n;
             n = q;
         }
-        // And those before it, which are only possible when the first edge tried was visible.
-        if e == start {
-            loop {
-                let q = self.hull_prev[e as usize];
-                if orient(self.xy(q), self.xy(e), p) >= 0.0 {
-                    break;
-                }
-                let t = self.add_triangle(
-                    q,
-                    i,
-                    e,
-                    EMPTY,
-                    self.hull_tri[e as usize],
-                    self.hull_tri[q as usize],
-                );
-                self.hull_tri[q as usize] = t;
-                self.legalize(t + 2)?;
-                self.hull_next[e as usize] = e;
-                e = q;
+    }
+
+    /// Adds the triangles of point `i` with the hull edges before `e` that see it (`p`), and
+    /// takes their points off the hull; returns the last hull point before them.
+    fn wrap_backward(&mut self, i: u32, mut e: u32, p: [f64; 2]) -> Result<u32, GeometryError> {
+        loop {
+            let q = self.hull_prev[e as usize];
+            if orient(self.xy(q), self.xy(e), p) >= 0.0 {
+                return Ok(e);
             }
+            let t = self.add_triangle(
+                q,
+                i,
+                e,
+                EMPTY,
+                self.hull_tri[e as usize],
+                self.hull_tri[q as usize],
+            );
+            self.hull_tri[q as usize] = t;
+            self.legalize(t + 2)?;
+            self.hull_next[e as usize] = e;
+            e = q;
         }
-        self.hull_prev[i as usize] = e;
-        self.hull_next[i as usize] = n;
-        self.hull_next[e as usize] = i;
-        self.hull_prev[n as usize] = i;
-        let k = self.hash_key(p);
-        self.hash[k] = i;
-        let k = self.hash_key(self.xy(e));
-        self.hash[k] = e;
-        Ok(true)
     }
 
     /// Adds point `i`, which lies inside or on the hull: walk to its triangle, split it (or the edge
@@ -600,24 +619,23 @@ impl<'a> Builder<'a> {
     }
 }
 
+/// spade's triangulation, to cross-check ours.
+#[cfg(test)]
+#[path = "../tests/support/spade.rs"]
+mod spade_support;
+
 #[cfg(test)]
 mod tests {
+    use super::spade_support::triangulate_spade;
     use super::*;
     use crate::synthetic::Pcg32;
-    use crate::triangulation::{TriangulationConfig, Triangulator, triangulate as any};
 
     fn check_deferring(points: &[[f64; 3]], defer: impl Fn(usize) -> bool, what: &str) {
         let ours = triangulate_deferring(points, defer).unwrap_or_else(|e| panic!("{what}: {e}"));
         let xy: Vec<[f64; 2]> = points.iter().map(|p| [p[0], p[1]]).collect();
         ours.check_invariants(&xy, true)
             .unwrap_or_else(|e| panic!("{what}: {e}"));
-        let spade = any(
-            points,
-            &TriangulationConfig {
-                triangulator: Triangulator::Spade,
-            },
-        )
-        .unwrap();
+        let spade = triangulate_spade(points);
         assert_eq!(ours.len(), spade.len(), "{what}");
     }
 

@@ -3,7 +3,11 @@
 //!
 //! Given a point cloud (x, y, z with z up) and, optionally, one semantic class per point, [`detect`]
 //! finds the flat, obstacle-free places and returns them as polygons with holes, each with the point
-//! farthest from every edge and obstacle and that distance (the *safe radius*), best first:
+//! farthest from every edge and obstacle and that distance (the *safe radius*), best first. Its one
+//! input, [`Cloud`], holds the points, their classes, what safe circles must keep clear of
+//! ([`KeepClear`]), optionally their triangulation made beforehand, and the [`CloudKind`]: a single
+//! scan, or a fused map's dense cells, for which three of the steps below read the points'
+//! density (explained on [`CloudKind`]).
 //!
 //! 1. [`triangulation`]: 2-D Delaunay triangulation of the points' x/y (exact predicates);
 //! 2. [`filter`]: the paper's Algorithm 1 (edge length, normal, height bypass, classes);
@@ -12,16 +16,17 @@
 //! 5. [`polylabel`]: pole of inaccessibility with its distance, within a requested precision;
 //! 6. [`ranking`]: filters and ordering of the sites by safe radius.
 //!
-//! Main types: [`Params`] (the paper's defaults), [`Detection`] with its [`LandingSite`]s and
-//! [`Polygon`]s, [`GeometryError`]. [`validation`] holds the invariant checks for meshes and polygons
+//! Main types: [`Cloud`] with its [`CloudKind`], [`Params`] (the paper's defaults), [`Detection`]
+//! with its [`LandingSite`]s and [`Polygon`]s, [`GeometryError`]. [`validation`] holds the invariant checks for meshes and polygons
 //! that tests call on every result, and [`synthetic`] seeded scenes for tests and benchmarks.
 //!
 //! ```
-//! use landing_geometry::{detect, synthetic::{Scene, SceneParams}, Params};
+//! use landing_geometry::{detect, synthetic::{Scene, SceneParams}, Cloud, Params};
 //!
 //! // A 20 m x 20 m flat roof 10 m up, no obstacles, ground and walls around it.
 //! let scene = Scene::generate(&SceneParams { obstacles: 0, ..SceneParams::default() }, 7);
-//! let found = detect(&scene.points, Some(&scene.classes), &Params::default()).unwrap();
+//! let cloud = Cloud::new(&scene.points, Some(&scene.classes));
+//! let found = detect(&cloud, &Params::default()).unwrap();
 //! let best = &found.sites[0];
 //! assert_eq!(best.rank, 1);
 //! assert!((best.plane_height_m - 10.0).abs() < 0.05);
@@ -34,6 +39,7 @@
 
 pub mod boundary;
 pub mod class;
+mod cloud;
 pub mod delaunay;
 pub mod filter;
 mod mesh;
@@ -48,9 +54,10 @@ pub mod validation;
 use std::time::{Duration, Instant};
 
 pub use class::SemanticClass;
+pub use cloud::{Cloud, CloudKind};
 pub use polylabel::Disk;
 pub use ranking::{KeepClear, KeepOut};
-pub use triangulation::{Triangulation, TriangulationConfig, Triangulator};
+pub use triangulation::Triangulation;
 
 /// Largest accepted absolute coordinate, metres. Beyond it f32 input has less than a metre of
 /// resolution and the result would be meaningless.
@@ -90,27 +97,6 @@ pub struct Params {
     pub min_hole_area_m2: f64,
     /// At most this many sites are returned.
     pub max_sites: usize,
-    /// Close the regions' pinholes ([`regions::close_pinholes`]): for dense clouds, such as a
-    /// fused map's cells, where range noise tilts short triangles past `dot_min`. Off by default
-    /// and for a single scan, whose points are too sparse for a hole without a point of its own
-    /// to say it is empty (`EVALUATION.md`). Not a `landing.v1.PipelineOptions` field: the
-    /// service sets it for fused streams.
-    pub close_pinholes: bool,
-    /// Landing polygons end halfway to the first point that is not theirs, where that point is
-    /// within this of the edge's ends ([`boundary::BoundaryParams::midpoint_max_edge_m`]); the
-    /// safe circles stay inside the polygons without it, so this moves no circle. For dense
-    /// clouds, such as a fused map's cells, whose points are a cell apart: a polygon of the last
-    /// points lies a cell inside the true edge. 0 (the default, the paper's polygons, and every
-    /// single scan, whose points lie 0.3-2.4 m apart) turns it off. Not a
-    /// `landing.v1.PipelineOptions` field: the service sets it for fused streams.
-    pub midpoint_max_edge_m: f64,
-    /// Keep-out disks bound a safe circle only where they meet one of the regions' triangles
-    /// with an x/y edge longer than this: where the points lie closer together, they show the
-    /// ground themselves (an obstacle that no point hit leaves a longer edge; see the `trust`
-    /// module). For dense clouds, such as a fused map's cells. 0 (the default, and every single
-    /// scan) keeps every disk. Not a `landing.v1.PipelineOptions` field: the service sets it for
-    /// fused streams.
-    pub keep_out_trust_edge_m: f64,
 }
 
 impl Default for Params {
@@ -126,9 +112,6 @@ impl Default for Params {
             min_area_m2: 0.0,
             min_hole_area_m2: 0.0,
             max_sites: 16,
-            close_pinholes: false,
-            midpoint_max_edge_m: 0.0,
-            keep_out_trust_edge_m: 0.0,
         }
     }
 }
@@ -184,8 +167,6 @@ impl Params {
         finite_non_negative("min_safe_radius_m", self.min_safe_radius_m)?;
         finite_non_negative("min_area_m2", self.min_area_m2)?;
         finite_non_negative("min_hole_area_m2", self.min_hole_area_m2)?;
-        finite_non_negative("midpoint_max_edge_m", self.midpoint_max_edge_m)?;
-        finite_non_negative("keep_out_trust_edge_m", self.keep_out_trust_edge_m)?;
         if self.max_sites == 0 {
             return Err(bad("max_sites", self.max_sites, "must be >= 1"));
         }
@@ -345,59 +326,66 @@ pub enum GeometryError {
     InvalidPolygon { reason: String },
 }
 
-/// Runs the whole pipeline on `points` (x, y, z in a frame with z up) and optional per-point
-/// classes (values of [`SemanticClass`], 0 = unknown) with the default triangulator.
+/// Runs the whole pipeline on `cloud` with `params`.
 ///
 /// Fewer than three distinct points, or points all on one line, give an empty [`Detection`], not an
 /// error: there is simply no surface. Non-finite or out-of-range coordinates (|c| > 1e7 m) give
-/// [`GeometryError::InvalidPoint`]; a duplicated x/y position is triangulated once (its other copies are left out).
-pub fn detect(
-    points: &[[f32; 3]],
-    classes: Option<&[u8]>,
-    params: &Params,
-) -> Result<Detection, GeometryError> {
-    detect_with(points, classes, params, &TriangulationConfig::default())
+/// [`GeometryError::InvalidPoint`]; a duplicated x/y position is triangulated once (its other
+/// copies are left out). A class list or flag list of the wrong length gives
+/// [`GeometryError::ClassCountMismatch`] or [`GeometryError::FlagCountMismatch`], a triangulation
+/// that names a point the cloud lacks [`GeometryError::InvalidMesh`].
+pub fn detect(cloud: &Cloud<'_>, params: &Params) -> Result<Detection, GeometryError> {
+    params.validate()?;
+    cloud.kind.validate()?;
+    check_points(cloud.points, cloud.classes)?;
+    check_flags(cloud)?;
+    let pts = widen(cloud.points);
+    let mut timings = StepTimings::default();
+
+    let t0 = Instant::now();
+    let made;
+    let tri = match cloud.triangulation {
+        Some(tri) => check_triangulation(tri, cloud.points.len())?,
+        None => {
+            made = triangulation::triangulate(&pts)?;
+            &made
+        }
+    };
+    let t1 = Instant::now();
+    timings.triangulation = t1 - t0;
+
+    let mask = filter::filter_triangles(
+        tri,
+        &pts,
+        cloud.classes,
+        &filter::FilterParams::from(params),
+    );
+    let t2 = Instant::now();
+    timings.triangle_filter = t2 - t1;
+
+    let regions = planar_regions(tri, &pts, mask, params, cloud.kind)?;
+    let t3 = Instant::now();
+    timings.plane_extraction = t3 - t2;
+
+    let outlines = outlines(tri, &pts, &regions, cloud)?;
+    let t4 = Instant::now();
+    timings.polygon_extraction = t4 - t3;
+
+    let sites = safe_sites(tri, &pts, &regions, outlines, params, cloud)?;
+    timings.polylabel = t4.elapsed();
+
+    Ok(Detection {
+        sites,
+        point_count: cloud.points.len(),
+        triangle_count: tri.len(),
+        timings,
+    })
 }
 
-/// [`detect`] with a choice of triangulator (for benchmarks and cross-checks).
-pub fn detect_with(
-    points: &[[f32; 3]],
-    classes: Option<&[u8]>,
-    params: &Params,
-    triangulation: &TriangulationConfig,
-) -> Result<Detection, GeometryError> {
-    run(
-        points,
-        classes,
-        params,
-        Mesh::Make(triangulation),
-        KeepClear::default(),
-    )
-}
-
-/// [`detect`] whose safe circles also stay clear of what `keep_clear` names: obstacles that the
-/// points missed (the camera's obstacle pixels, say), and ground flagged per point. A flag list
-/// of the wrong length gives [`GeometryError::FlagCountMismatch`].
-pub fn detect_keeping_out(
-    points: &[[f32; 3]],
-    classes: Option<&[u8]>,
-    params: &Params,
-    keep_clear: KeepClear<'_>,
-) -> Result<Detection, GeometryError> {
-    run(
-        points,
-        classes,
-        params,
-        Mesh::Make(&TriangulationConfig::default()),
-        keep_clear,
-    )
-}
-
-/// The triangulation [`detect_keeping_out`] makes of `points`, for
-/// [`detect_keeping_out_triangulated`]: made beforehand, say on another thread while the
-/// points' classes are still being made.
+/// The triangulation [`detect`] makes of `points`, to give it in [`Cloud::with_triangulation`]:
+/// made beforehand, say on another thread while the points' classes are still being made.
 pub fn triangulate_points(points: &[[f32; 3]]) -> Result<Triangulation, GeometryError> {
-    triangulation::triangulate(&widen(points), &TriangulationConfig::default())
+    triangulation::triangulate(&widen(points))
 }
 
 /// `points` in the double precision the geometry works in.
@@ -405,163 +393,140 @@ fn widen(points: &[[f32; 3]]) -> Vec<[f64; 3]> {
     points.iter().map(|p| p.map(f64::from)).collect()
 }
 
-/// [`detect_keeping_out`] on points already triangulated: `tri` must be
-/// [`triangulate_points`] of `points`; its time is the caller's and reported as zero. A triangulation that names a point `points` lacks gives
-/// [`GeometryError::InvalidMesh`].
-pub fn detect_keeping_out_triangulated(
-    points: &[[f32; 3]],
-    tri: Triangulation,
-    classes: Option<&[u8]>,
-    params: &Params,
-    keep_clear: KeepClear<'_>,
-) -> Result<Detection, GeometryError> {
+/// A triangulation given with the cloud, if every vertex it names is one of the `points` points.
+fn check_triangulation(
+    tri: &Triangulation,
+    points: usize,
+) -> Result<&Triangulation, GeometryError> {
     if tri.halfedges.len() != tri.triangles.len()
         || !tri.triangles.len().is_multiple_of(3)
-        || tri.triangles.iter().any(|&v| v as usize >= points.len())
+        || tri.triangles.iter().any(|&v| v as usize >= points)
     {
         return Err(GeometryError::InvalidMesh {
             reason: format!(
-                "a triangulation of {} vertex slots for {} points",
+                "a triangulation of {} vertex slots for {points} points",
                 tri.triangles.len(),
-                points.len()
             ),
         });
     }
-    run(points, classes, params, Mesh::Given(tri), keep_clear)
+    Ok(tri)
 }
 
-/// Where [`run`]'s triangulation comes from.
-enum Mesh<'a> {
-    Make(&'a TriangulationConfig),
-    Given(Triangulation),
-}
-
-fn run(
-    points: &[[f32; 3]],
-    classes: Option<&[u8]>,
+/// The paper's Algorithm 2 on the kept triangles, with a fused map's pinholes closed.
+fn planar_regions(
+    tri: &Triangulation,
+    pts: &[[f64; 3]],
+    mask: Vec<bool>,
     params: &Params,
-    mesh: Mesh<'_>,
-    keep_clear: KeepClear<'_>,
-) -> Result<Detection, GeometryError> {
-    params.validate()?;
-    check_points(points, classes)?;
-    if let Some(flags) = keep_clear.points
-        && flags.len() != points.len()
-    {
-        return Err(GeometryError::FlagCountMismatch {
-            points: points.len(),
-            flags: flags.len(),
-        });
-    }
-    let pts = widen(points);
-    let mut timings = StepTimings::default();
-
-    let t0 = Instant::now();
-    let tri = match mesh {
-        Mesh::Make(config) => triangulation::triangulate(&pts, config)?,
-        Mesh::Given(tri) => tri,
-    };
-    let t1 = Instant::now();
-    timings.triangulation = t1 - t0;
-
-    let mask = filter::filter_triangles(&tri, &pts, classes, &filter::FilterParams::from(params));
-    let t2 = Instant::now();
-    timings.triangle_filter = t2 - t1;
-
+    kind: CloudKind,
+) -> Result<regions::Regions, GeometryError> {
     let mut regions = regions::extract_regions(
-        &tri,
-        &pts,
+        tri,
+        pts,
         mask,
         &regions::RegionParams {
             min_triangles: params.min_region_triangles,
         },
     )?;
-    if params.close_pinholes {
-        regions::close_pinholes(&tri, &pts, &mut regions, params.l_max_m, params.z_min_m);
+    if kind.closes_pinholes() {
+        regions::close_pinholes(tri, pts, &mut regions, params.l_max_m, params.z_min_m);
     }
-    let t3 = Instant::now();
-    timings.plane_extraction = t3 - t2;
+    Ok(regions)
+}
 
-    // With midpoint edges, each region has two polygons from one walk of its boundary: the one
-    // of its own points, which the safe circle stays in, and the grown one, which is returned.
-    let (polygons, grown) = if params.midpoint_max_edge_m > 0.0 {
-        let pairs = boundary::region_polygons_with_midpoints(
-            &tri,
-            &pts,
-            &regions,
-            params.midpoint_max_edge_m,
-        )?;
-        let (own, grown): (Vec<Polygon>, Vec<Polygon>) = pairs.into_iter().unzip();
-        (own, Some(grown))
-    } else {
-        let params = boundary::BoundaryParams::default();
-        (
-            boundary::region_polygons(&tri, &pts, &regions, &params)?,
-            None,
-        )
-    };
-    // Where points are flagged, the circles stay in the part of each region without them.
-    let mut parts = match keep_clear.points {
+/// Each region's returned polygon, and the rings its safe circle stays in where those are not
+/// the polygon itself (`None` for all: the polygons).
+struct Outlines {
+    polygons: Vec<Polygon>,
+    parts: Option<Vec<Option<boundary::Rings>>>,
+}
+
+/// The regions' polygons, and the rings their safe circles stay in: where points are flagged,
+/// the part of each region without them; with midpoint edges (a fused map), the polygon of the
+/// region's own points, while the grown one is returned.
+fn outlines(
+    tri: &Triangulation,
+    pts: &[[f64; 3]],
+    regions: &regions::Regions,
+    cloud: &Cloud<'_>,
+) -> Result<Outlines, GeometryError> {
+    let parts = match cloud.keep_clear.points {
         Some(flags) if flags.iter().any(|&f| f) => {
-            Some(boundary::region_parts(&tri, &pts, &regions, |t| {
+            Some(boundary::region_parts(tri, pts, regions, |t| {
                 let t = 3 * t as usize;
                 !tri.triangles[t..t + 3].iter().any(|&v| flags[v as usize])
             })?)
         }
         _ => None,
     };
-    let polygons = match grown {
-        Some(grown) => {
-            // The circles stay in the polygons of the regions' own points (or their parts).
-            let mut own: Vec<Option<boundary::Rings>> =
-                parts.unwrap_or_else(|| vec![None; polygons.len()]);
-            for (part, polygon) in own.iter_mut().zip(&polygons) {
-                part.get_or_insert_with(|| {
-                    std::iter::once(polygon.shell.clone())
-                        .chain(polygon.holes.iter().cloned())
-                        .collect()
-                });
-            }
-            parts = Some(own);
-            // By construction a grown polygon is valid; should rounding ever make one not, the
-            // region keeps the polygon of its own points.
-            grown
-                .into_iter()
-                .zip(polygons)
-                .map(|(g, p)| if g.validate().is_ok() { g } else { p })
+    let max_edge = cloud.kind.midpoint_max_edge_m();
+    if max_edge <= 0.0 {
+        let params = boundary::BoundaryParams::default();
+        let polygons = boundary::region_polygons(tri, pts, regions, &params)?;
+        return Ok(Outlines { polygons, parts });
+    }
+    // Each region has two polygons from one walk of its boundary: the one of its own points,
+    // which the safe circle stays in (or in its part), and the grown one, which is returned.
+    let pairs = boundary::region_polygons_with_midpoints(tri, pts, regions, max_edge)?;
+    let mut own: Vec<Option<boundary::Rings>> = parts.unwrap_or_else(|| vec![None; pairs.len()]);
+    for (part, (polygon, _)) in own.iter_mut().zip(&pairs) {
+        part.get_or_insert_with(|| {
+            std::iter::once(polygon.shell.clone())
+                .chain(polygon.holes.iter().cloned())
                 .collect()
-        }
-        None => polygons,
-    };
-    let t4 = Instant::now();
-    timings.polygon_extraction = t4 - t3;
+        });
+    }
+    // By construction a grown polygon is valid; should rounding ever make one not, the region
+    // keeps the polygon of its own points.
+    let polygons = pairs
+        .into_iter()
+        .map(|(p, g)| if g.validate().is_ok() { g } else { p })
+        .collect();
+    Ok(Outlines {
+        polygons,
+        parts: Some(own),
+    })
+}
 
-    // Where the regions' points are dense, they answer for the ground: disks there bound nothing.
+/// The ranked sites: polylabel in each outline, clear of the cloud's keep-out disks. Where a
+/// fused map's points are dense they answer for the ground, and disks there bound nothing.
+fn safe_sites(
+    tri: &Triangulation,
+    pts: &[[f64; 3]],
+    regions: &regions::Regions,
+    outlines: Outlines,
+    params: &Params,
+    cloud: &Cloud<'_>,
+) -> Result<Vec<LandingSite>, GeometryError> {
+    let trust_edge = cloud.kind.keep_out_trust_edge_m();
     let gaps;
     let over_gaps;
-    let disks = match keep_clear.disks {
-        Some(inner) if params.keep_out_trust_edge_m > 0.0 => {
-            gaps = trust::Gaps::new(&tri, &pts, &regions, params.keep_out_trust_edge_m);
+    let disks = match cloud.keep_clear.disks {
+        Some(inner) if trust_edge > 0.0 => {
+            gaps = trust::Gaps::new(tri, pts, regions, trust_edge);
             over_gaps = trust::OverGaps { inner, gaps: &gaps };
             Some(&over_gaps as &dyn ranking::KeepOut)
         }
         other => other,
     };
-    let sites = ranking::rank_sites(
-        &regions,
-        polygons,
-        parts.as_deref(),
+    ranking::rank_sites(
+        regions,
+        outlines.polygons,
+        outlines.parts.as_deref(),
         &ranking::RankingParams::from(params),
         disks,
-    )?;
-    timings.polylabel = t4.elapsed();
+    )
+}
 
-    Ok(Detection {
-        sites,
-        point_count: points.len(),
-        triangle_count: tri.len(),
-        timings,
-    })
+/// One keep-clear flag per point, when there are flags.
+fn check_flags(cloud: &Cloud<'_>) -> Result<(), GeometryError> {
+    match cloud.keep_clear.points {
+        Some(flags) if flags.len() != cloud.points.len() => Err(GeometryError::FlagCountMismatch {
+            points: cloud.points.len(),
+            flags: flags.len(),
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Boundary checks on the input, once: finite, in range, one class per point.

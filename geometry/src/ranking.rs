@@ -8,7 +8,7 @@
 
 use crate::boundary::{Rings, ring_is_ccw};
 use crate::polylabel::{self, Disk, PolylabelParams, polylabel_in_rings};
-use crate::regions::Regions;
+use crate::regions::{Region, Regions};
 use crate::validation::ring_signed_area;
 use crate::{GeometryError, LandingSite, Params, Polygon};
 
@@ -95,13 +95,45 @@ pub fn rank_sites(
             ),
         });
     }
-    // Holes smaller than the parameter are left out.
-    let small = |ring: &Vec<[f64; 2]>| ring_signed_area(ring).abs() < params.min_hole_area_m2;
-    // (upper bound of the radius, region index, polygon, area) of every region that can qualify.
-    let mut candidates: Vec<(f64, usize, Polygon, f64)> = Vec::new();
-    for (r, mut polygon) in polygons.into_iter().enumerate() {
+    let mut sites: Vec<(usize, LandingSite)> = Vec::new();
+    for c in candidates(polygons, params) {
+        if sites.len() >= params.max_sites {
+            // The max_sites-th best radius so far; nothing with a smaller bound can displace it.
+            let mut radii: Vec<f64> = sites.iter().map(|s| s.1.safe_radius_m).collect();
+            radii.sort_by(|a, b| b.total_cmp(a));
+            if radii[params.max_sites - 1] > c.bound {
+                break;
+            }
+        }
+        let r = c.region;
+        let part = parts.and_then(|p| p[r].as_ref());
+        if let Some(site) = site_of(&regions.regions[r], c, part, keep_out, params)? {
+            sites.push((r, site));
+        }
+    }
+    Ok(ranked(sites, params.max_sites))
+}
+
+/// A region's polygon that can qualify, with the upper bound of its safe radius.
+struct Candidate {
+    bound: f64,
+    region: usize,
+    polygon: Polygon,
+    area: f64,
+}
+
+/// Holes smaller than [`RankingParams::min_hole_area_m2`] are left out.
+fn is_small(ring: &[[f64; 2]], params: &RankingParams) -> bool {
+    ring_signed_area(ring).abs() < params.min_hole_area_m2
+}
+
+/// The polygons, less their small holes, whose area and radius bound can pass the filters,
+/// largest bound first (then in region order).
+fn candidates(polygons: Vec<Polygon>, params: &RankingParams) -> Vec<Candidate> {
+    let mut candidates = Vec::new();
+    for (region, mut polygon) in polygons.into_iter().enumerate() {
         if params.min_hole_area_m2 > 0.0 {
-            polygon.holes.retain(|h| !small(h));
+            polygon.holes.retain(|h| !is_small(h, params));
         }
         let area = polygon.area();
         if area < params.min_area_m2 {
@@ -111,71 +143,78 @@ pub fn rank_sites(
         if bound < params.min_safe_radius_m {
             continue;
         }
-        candidates.push((bound, r, polygon, area));
-    }
-    candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-
-    let mut sites: Vec<(usize, LandingSite)> = Vec::new();
-    for (bound, r, polygon, area) in candidates {
-        if sites.len() >= params.max_sites {
-            // The max_sites-th best radius so far; nothing with a smaller bound can displace it.
-            let mut radii: Vec<f64> = sites.iter().map(|s| s.1.safe_radius_m).collect();
-            radii.sort_by(|a, b| b.total_cmp(a));
-            if radii[params.max_sites - 1] > bound {
-                break;
-            }
-        }
-        let region = &regions.regions[r];
-        let disks = keep_out.map_or_else(Vec::new, |k| {
-            k.disks_on_plane(region.mean, region.normal, polygon.bounds())
+        candidates.push(Candidate {
+            bound,
+            region,
+            polygon,
+            area,
         });
-        let rings: Vec<&[[f64; 2]]> = match parts.and_then(|p| p[r].as_ref()) {
-            // The part's holes (its clockwise rings) were not filtered above.
-            Some(part) => part
-                .iter()
-                .filter(|ring| ring_is_ccw(ring) || !small(ring))
-                .map(Vec::as_slice)
-                .collect(),
-            None => polylabel::rings(&polygon),
-        };
-        if rings.is_empty() {
-            continue;
-        }
-        let pole = polylabel_in_rings(&rings, &disks, &params.polylabel)?;
-        if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0) {
-            continue;
-        }
-        let [nx, ny, nz] = region.normal;
-        let [mx, my, mz] = region.mean;
-        let cz = mz - (nx * (pole.center[0] - mx) + ny * (pole.center[1] - my)) / nz;
-        sites.push((
-            r,
-            LandingSite {
-                rank: 0,
-                polygon,
-                plane_height_m: mz,
-                center: [pole.center[0], pole.center[1], cz],
-                safe_radius_m: pole.distance,
-                area_m2: area,
-                normal: region.normal,
-                point_count: region.point_count,
-                triangle_count: region.triangles.len(),
-            },
-        ));
     }
+    candidates.sort_by(|a, b| b.bound.total_cmp(&a.bound).then(a.region.cmp(&b.region)));
+    candidates
+}
+
+/// The candidate's site: polylabel in its `part` (or its polygon), clear of the keep-out disks
+/// on its plane; `None` when the circle is too small or there is nothing to put it in.
+fn site_of(
+    region: &Region,
+    candidate: Candidate,
+    part: Option<&Rings>,
+    keep_out: Option<&dyn KeepOut>,
+    params: &RankingParams,
+) -> Result<Option<LandingSite>, GeometryError> {
+    let Candidate { polygon, area, .. } = candidate;
+    let disks = keep_out.map_or_else(Vec::new, |k| {
+        k.disks_on_plane(region.mean, region.normal, polygon.bounds())
+    });
+    let rings: Vec<&[[f64; 2]]> = match part {
+        // The part's holes (its clockwise rings) were not filtered above.
+        Some(part) => part
+            .iter()
+            .filter(|ring| ring_is_ccw(ring) || !is_small(ring, params))
+            .map(Vec::as_slice)
+            .collect(),
+        None => polylabel::rings(&polygon),
+    };
+    if rings.is_empty() {
+        return Ok(None);
+    }
+    let pole = polylabel_in_rings(&rings, &disks, &params.polylabel)?;
+    if pole.distance < params.min_safe_radius_m || (!disks.is_empty() && pole.distance <= 0.0) {
+        return Ok(None);
+    }
+    let [nx, ny, nz] = region.normal;
+    let [mx, my, mz] = region.mean;
+    let cz = mz - (nx * (pole.center[0] - mx) + ny * (pole.center[1] - my)) / nz;
+    Ok(Some(LandingSite {
+        rank: 0,
+        polygon,
+        plane_height_m: mz,
+        center: [pole.center[0], pole.center[1], cz],
+        safe_radius_m: pole.distance,
+        area_m2: area,
+        normal: region.normal,
+        point_count: region.point_count,
+        triangle_count: region.triangles.len(),
+    }))
+}
+
+/// The best `max_sites` of the (region index, site) pairs, ranked: by safe radius, then area,
+/// then region order.
+fn ranked(mut sites: Vec<(usize, LandingSite)>, max_sites: usize) -> Vec<LandingSite> {
     sites.sort_by(|a, b| {
         b.1.safe_radius_m
             .total_cmp(&a.1.safe_radius_m)
             .then(b.1.area_m2.total_cmp(&a.1.area_m2))
             .then(a.0.cmp(&b.0))
     });
-    sites.truncate(params.max_sites);
-    Ok(sites
+    sites.truncate(max_sites);
+    sites
         .into_iter()
         .enumerate()
         .map(|(i, (_, mut s))| {
             s.rank = i as u32 + 1;
             s
         })
-        .collect())
+        .collect()
 }

@@ -242,7 +242,7 @@ pub fn close_pinholes(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::triangulation::{TriangulationConfig, triangulate};
+    use crate::triangulation::triangulate;
 
     /// A 0.15 m grid of 9 × 7 points at z = 0 (slightly jittered so the triangulation is
     /// unique), triangulated.
@@ -254,7 +254,7 @@ mod tests {
                 pts.push([0.15 * f64::from(x) + j, 0.15 * f64::from(y) - j, 0.0]);
             }
         }
-        let tri = triangulate(&pts, &TriangulationConfig::default()).unwrap();
+        let tri = triangulate(&pts).unwrap();
         (pts, tri)
     }
 
@@ -331,7 +331,7 @@ mod tests {
                 pts.push([f64::from(x), f64::from(y) + 0.01 * f64::from(x % 3), 0.0]);
             }
         }
-        let tri = triangulate(&pts, &TriangulationConfig::default()).unwrap();
+        let tri = triangulate(&pts).unwrap();
         // Drop every triangle that touches the column x = 4.
         let keep: Vec<bool> = tri
             .triangles

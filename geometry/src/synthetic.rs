@@ -9,7 +9,7 @@
 //! The generator is a local PCG so a seed gives bit-identical scenes on every run, platform and
 //! dependency version.
 
-use crate::SemanticClass;
+use crate::{CloudKind, SemanticClass};
 
 /// What to generate; `Default` is a 20 m × 20 m roof 10 m up with three obstacles, ~1500 points
 /// (the paper's average frame).
@@ -167,91 +167,15 @@ impl Scene {
     /// Generates the scene for `params` and `seed`; the same pair always gives the same scene.
     pub fn generate(params: &SceneParams, seed: u64) -> Scene {
         let mut rng = Pcg32::new(seed);
-        let [w, h] = params.roof_size_m;
-        let mut roofs = vec![RoofTruth {
-            min: [0.0, 0.0],
-            max: [w, h],
-            height_m: params.roof_height_m,
-            slope: params.roof_slope,
-            courtyard: params.courtyard_m.map(|[cw, ch]| {
-                (
-                    [(w - cw) / 2.0, (h - ch) / 2.0],
-                    [(w + cw) / 2.0, (h + ch) / 2.0],
-                )
-            }),
-        }];
-        if let Some(s) = &params.second_roof {
-            let x0 = w + s.gap_m;
-            roofs.push(RoofTruth {
-                min: [x0, 0.0],
-                max: [x0 + s.size_m[0], s.size_m[1]],
-                height_m: s.height_m,
-                slope: 0.0,
-                courtyard: None,
-            });
-        }
-        let main = roofs[0].clone();
-        let mut obstacles = Vec::new();
-        let mut tries = 0;
-        while obstacles.len() < params.obstacles && tries < 100 * (params.obstacles + 1) {
-            tries += 1;
-            let sx = rng.range(params.obstacle_side_m[0], params.obstacle_side_m[1]);
-            let sy = rng.range(params.obstacle_side_m[0], params.obstacle_side_m[1]);
-            if sx + 1.0 >= w || sy + 1.0 >= h {
-                continue;
-            }
-            let x0 = rng.range(0.5, w - 0.5 - sx);
-            let y0 = rng.range(0.5, h - 0.5 - sy);
-            let corners = [[x0, y0], [x0 + sx, y0], [x0, y0 + sy], [x0 + sx, y0 + sy]];
-            if !corners.iter().all(|c| main.contains(c[0], c[1])) {
-                continue;
-            }
-            let base = main.height_at(x0);
-            let top = base + rng.range(params.obstacle_height_m[0], params.obstacle_height_m[1]);
-            let class = OBSTACLE_CLASSES[obstacles.len() % OBSTACLE_CLASSES.len()];
-            obstacles.push(ObstacleTruth {
-                min: [x0, y0, base],
-                max: [x0 + sx, y0 + sy, top],
-                class,
-            });
-        }
-
-        // Extent of everything, with the ground margin.
-        let m = params.ground_margin_m;
-        let (mut lo, mut hi) = ([-m, -m], [w + m, h + m]);
-        for r in &roofs {
-            hi = [hi[0].max(r.max[0] + m), hi[1].max(r.max[1] + m)];
-            lo = [lo[0].min(r.min[0] - m), lo[1].min(r.min[1] - m)];
-        }
-        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
-        let wall_area: f64 = if params.walls {
-            roofs
-                .iter()
-                .map(|r| {
-                    let mut p = 2.0 * (r.max[0] - r.min[0] + r.max[1] - r.min[1]);
-                    if let Some((a, b)) = r.courtyard {
-                        p += 2.0 * (b[0] - a[0] + b[1] - a[1]);
-                    }
-                    p * r.height_m.max(0.0)
-                })
-                .sum()
-        } else {
-            0.0
-        };
-        // Walls are sampled three times sparser than the raster (a scan sees them at a glancing
-        // angle).
-        let n = params.point_count.max(4) as f64;
-        let spacing = ((area + wall_area / 9.0) / n).sqrt();
-        let cols = ((hi[0] - lo[0]) / spacing).round().max(2.0) as usize;
-        let rows = ((hi[1] - lo[1]) / spacing).round().max(2.0) as usize;
-        let (dx, dy) = ((hi[0] - lo[0]) / cols as f64, (hi[1] - lo[1]) / rows as f64);
-
+        let roofs = roofs(params);
+        let obstacles = place_obstacles(params, &roofs[0], &mut rng);
+        let raster = Raster::new(params, &roofs);
         let mut points = Vec::with_capacity(params.point_count + 16);
         let mut classes = Vec::with_capacity(params.point_count + 16);
-        for r in 0..rows {
-            for c in 0..cols {
-                let x = lo[0] + (c as f64 + 0.5 + rng.range(-0.35, 0.35)) * dx;
-                let y = lo[1] + (r as f64 + 0.5 + rng.range(-0.35, 0.35)) * dy;
+        for r in 0..raster.rows {
+            for c in 0..raster.cols {
+                let x = raster.lo[0] + (c as f64 + 0.5 + rng.range(-0.35, 0.35)) * raster.dx;
+                let y = raster.lo[1] + (r as f64 + 0.5 + rng.range(-0.35, 0.35)) * raster.dy;
                 let (z, class) = surface(&roofs, &obstacles, x, y);
                 let z = z + params.noise_m * rng.normal();
                 points.push([x as f32, y as f32, z as f32]);
@@ -259,40 +183,11 @@ impl Scene {
             }
         }
         if params.walls {
-            let step = 3.0 * spacing;
+            let step = 3.0 * raster.spacing;
             for roof in &roofs {
-                let mut outlines = vec![(roof.min, roof.max, 1.0)];
-                if let Some((a, b)) = roof.courtyard {
-                    outlines.push((a, b, -1.0));
-                }
-                for (a, b, outward) in outlines {
-                    let corners = [[a[0], a[1]], [b[0], a[1]], [b[0], b[1]], [a[0], b[1]]];
-                    for k in 0..4 {
-                        let (p, q) = (corners[k], corners[(k + 1) % 4]);
-                        let len = ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt();
-                        // Outward normal of a counter-clockwise edge is (dy, -dx).
-                        let nrm = [
-                            (q[1] - p[1]) / len * outward,
-                            -(q[0] - p[0]) / len * outward,
-                        ];
-                        let along = (len / step).floor() as usize;
-                        for i in 0..along {
-                            let t = (i as f64 + rng.range(0.1, 0.9)) / along as f64;
-                            let off = rng.range(0.01, 0.05);
-                            let x = p[0] + t * (q[0] - p[0]) + off * nrm[0];
-                            let y = p[1] + t * (q[1] - p[1]) + off * nrm[1];
-                            let top = roof.height_at(x.clamp(roof.min[0], roof.max[0]));
-                            let levels = (top / step).floor() as usize;
-                            for j in 0..levels {
-                                let z = (j as f64 + rng.range(0.1, 0.9)) * step;
-                                let jitter = rng.range(-0.3, 0.3) * step;
-                                let x = x + jitter * (q[0] - p[0]) / len;
-                                let y = y + jitter * (q[1] - p[1]) / len;
-                                points.push([x as f32, y as f32, z as f32]);
-                                classes.push(SemanticClass::BuildingWall as u8);
-                            }
-                        }
-                    }
+                for p in wall_points(roof, step, &mut rng) {
+                    points.push(p);
+                    classes.push(SemanticClass::BuildingWall as u8);
                 }
             }
         }
@@ -300,7 +195,7 @@ impl Scene {
             points,
             classes,
             truth: SceneTruth { roofs, obstacles },
-            spacing_m: dx.max(dy),
+            spacing_m: raster.dx.max(raster.dy),
         }
     }
 
@@ -341,6 +236,157 @@ fn surface(
         }
     }
     (0.0, SemanticClass::Ground)
+}
+
+/// The main roof (with its courtyard) and the second roof, if any.
+fn roofs(params: &SceneParams) -> Vec<RoofTruth> {
+    let [w, h] = params.roof_size_m;
+    let mut roofs = vec![RoofTruth {
+        min: [0.0, 0.0],
+        max: [w, h],
+        height_m: params.roof_height_m,
+        slope: params.roof_slope,
+        courtyard: params.courtyard_m.map(|[cw, ch]| {
+            (
+                [(w - cw) / 2.0, (h - ch) / 2.0],
+                [(w + cw) / 2.0, (h + ch) / 2.0],
+            )
+        }),
+    }];
+    if let Some(s) = &params.second_roof {
+        let x0 = w + s.gap_m;
+        roofs.push(RoofTruth {
+            min: [x0, 0.0],
+            max: [x0 + s.size_m[0], s.size_m[1]],
+            height_m: s.height_m,
+            slope: 0.0,
+            courtyard: None,
+        });
+    }
+    roofs
+}
+
+/// Up to `params.obstacles` boxes standing on the `main` roof, each at least 0.5 m inside its
+/// edge and off its courtyard (a bounded number of tries).
+fn place_obstacles(params: &SceneParams, main: &RoofTruth, rng: &mut Pcg32) -> Vec<ObstacleTruth> {
+    let [w, h] = params.roof_size_m;
+    let mut obstacles = Vec::new();
+    let mut tries = 0;
+    while obstacles.len() < params.obstacles && tries < 100 * (params.obstacles + 1) {
+        tries += 1;
+        let sx = rng.range(params.obstacle_side_m[0], params.obstacle_side_m[1]);
+        let sy = rng.range(params.obstacle_side_m[0], params.obstacle_side_m[1]);
+        if sx + 1.0 >= w || sy + 1.0 >= h {
+            continue;
+        }
+        let x0 = rng.range(0.5, w - 0.5 - sx);
+        let y0 = rng.range(0.5, h - 0.5 - sy);
+        let corners = [[x0, y0], [x0 + sx, y0], [x0, y0 + sy], [x0 + sx, y0 + sy]];
+        if !corners.iter().all(|c| main.contains(c[0], c[1])) {
+            continue;
+        }
+        let base = main.height_at(x0);
+        let top = base + rng.range(params.obstacle_height_m[0], params.obstacle_height_m[1]);
+        let class = OBSTACLE_CLASSES[obstacles.len() % OBSTACLE_CLASSES.len()];
+        obstacles.push(ObstacleTruth {
+            min: [x0, y0, base],
+            max: [x0 + sx, y0 + sy, top],
+            class,
+        });
+    }
+    obstacles
+}
+
+/// The jittered raster the surfaces are sampled on: everything with the ground margin, at the
+/// spacing that gives about `params.point_count` points with the walls.
+struct Raster {
+    lo: [f64; 2],
+    cols: usize,
+    rows: usize,
+    dx: f64,
+    dy: f64,
+    spacing: f64,
+}
+
+impl Raster {
+    fn new(params: &SceneParams, roofs: &[RoofTruth]) -> Self {
+        let [w, h] = params.roof_size_m;
+        let m = params.ground_margin_m;
+        let (mut lo, mut hi) = ([-m, -m], [w + m, h + m]);
+        for r in roofs {
+            hi = [hi[0].max(r.max[0] + m), hi[1].max(r.max[1] + m)];
+            lo = [lo[0].min(r.min[0] - m), lo[1].min(r.min[1] - m)];
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        let wall_area: f64 = if params.walls {
+            roofs.iter().map(wall_area).sum()
+        } else {
+            0.0
+        };
+        // Walls are sampled three times sparser than the raster (a scan sees them at a glancing
+        // angle).
+        let n = params.point_count.max(4) as f64;
+        let spacing = ((area + wall_area / 9.0) / n).sqrt();
+        let cols = ((hi[0] - lo[0]) / spacing).round().max(2.0) as usize;
+        let rows = ((hi[1] - lo[1]) / spacing).round().max(2.0) as usize;
+        let (dx, dy) = ((hi[0] - lo[0]) / cols as f64, (hi[1] - lo[1]) / rows as f64);
+        Self {
+            lo,
+            cols,
+            rows,
+            dx,
+            dy,
+            spacing,
+        }
+    }
+}
+
+/// The area of a roof's walls: its outline and its courtyard's, up to its height.
+fn wall_area(r: &RoofTruth) -> f64 {
+    let mut p = 2.0 * (r.max[0] - r.min[0] + r.max[1] - r.min[1]);
+    if let Some((a, b)) = r.courtyard {
+        p += 2.0 * (b[0] - a[0] + b[1] - a[1]);
+    }
+    p * r.height_m.max(0.0)
+}
+
+/// Points on the walls of `roof` (outside and around its courtyard), about `step` apart, just
+/// off the wall outward.
+fn wall_points(roof: &RoofTruth, step: f64, rng: &mut Pcg32) -> Vec<[f32; 3]> {
+    let mut points = Vec::new();
+    let mut outlines = vec![(roof.min, roof.max, 1.0)];
+    if let Some((a, b)) = roof.courtyard {
+        outlines.push((a, b, -1.0));
+    }
+    for (a, b, outward) in outlines {
+        let corners = [[a[0], a[1]], [b[0], a[1]], [b[0], b[1]], [a[0], b[1]]];
+        for k in 0..4 {
+            let (p, q) = (corners[k], corners[(k + 1) % 4]);
+            let len = ((q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2)).sqrt();
+            // Outward normal of a counter-clockwise edge is (dy, -dx).
+            let nrm = [
+                (q[1] - p[1]) / len * outward,
+                -(q[0] - p[0]) / len * outward,
+            ];
+            let along = (len / step).floor() as usize;
+            for i in 0..along {
+                let t = (i as f64 + rng.range(0.1, 0.9)) / along as f64;
+                let off = rng.range(0.01, 0.05);
+                let x = p[0] + t * (q[0] - p[0]) + off * nrm[0];
+                let y = p[1] + t * (q[1] - p[1]) + off * nrm[1];
+                let top = roof.height_at(x.clamp(roof.min[0], roof.max[0]));
+                let levels = (top / step).floor() as usize;
+                for j in 0..levels {
+                    let z = (j as f64 + rng.range(0.1, 0.9)) * step;
+                    let jitter = rng.range(-0.3, 0.3) * step;
+                    let x = x + jitter * (q[0] - p[0]) / len;
+                    let y = y + jitter * (q[1] - p[1]) / len;
+                    points.push([x as f32, y as f32, z as f32]);
+                }
+            }
+        }
+    }
+    points
 }
 
 /// PCG-XSH-RR 32: small, fast, and fixed forever (unlike a library's default generator).
@@ -420,11 +466,10 @@ mod tests {
 /// finds replay in this crate's tests: 8 bytes pick parameters within the ranges the API
 /// accepts, then 13 bytes a point (f32 x, y, z; a class), at most `max_points` points; points
 /// with a non-finite coordinate or one beyond 1e7 m are skipped, as the service refuses them.
-/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd,
-/// pinholes are closed when the 8th is, and polygons end at midpoints when the 8th byte's
-/// second bit is set (its top six bits give the limit, up to 5 m). When the 7th byte's second
-/// bit is set, the first 8 points also stand for keep-out disks (radius from the class byte, up
-/// to 2 m) and its top six bits give `keep_out_trust_edge_m` (0 to 5 m).
+/// `None` without the 8 parameter bytes. The classes are used when the 7th byte is odd, and the
+/// first 8 points also stand for keep-out disks (radius from the class byte, up to 2 m) when its
+/// second bit is set. The cloud is a [`CloudKind::FusedMap`] when the 8th byte is odd, of cells
+/// from 0.025 to 2.5 m (its top six bits), a [`CloudKind::Scan`] otherwise.
 pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> {
     let (head, body) = data.split_first_chunk::<8>()?;
     let unit = |b: u8| f64::from(b) / 255.0;
@@ -436,18 +481,14 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         polylabel_precision_m: 0.01 + unit(head[3]) * 2.0,
         min_region_triangles: usize::from(head[4] % 16),
         max_sites: usize::from(head[5] % 8) + 1,
-        close_pinholes: head[7] & 1 == 1,
-        midpoint_max_edge_m: if head[7] & 2 == 2 {
-            0.05 + f64::from(head[7] >> 2) / 63.0 * 5.0
-        } else {
-            0.0
-        },
-        keep_out_trust_edge_m: if with_disks {
-            f64::from(head[6] >> 2) / 63.0 * 5.0
-        } else {
-            0.0
-        },
         ..crate::Params::default()
+    };
+    let kind = if head[7] & 1 == 1 {
+        CloudKind::FusedMap {
+            cell_m: 0.025 + f64::from(head[7] >> 2) / 63.0 * 2.475,
+        }
+    } else {
+        CloudKind::Scan
     };
     let mut points = Vec::new();
     let mut classes = Vec::new();
@@ -470,6 +511,7 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
         points,
         disks,
         classes: (head[6] & 1 == 1).then_some(classes),
+        kind,
         params,
     })
 }
@@ -478,8 +520,9 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectInput {
     pub points: Vec<[f32; 3]>,
-    /// Keep-out disks for every plane ([`crate::detect_keeping_out`]); none for [`crate::detect`].
+    /// Keep-out disks for every plane ([`crate::Cloud::keep_clear`]), when not empty.
     pub disks: Vec<crate::Disk>,
     pub classes: Option<Vec<u8>>,
+    pub kind: CloudKind,
     pub params: crate::Params,
 }

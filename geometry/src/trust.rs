@@ -8,7 +8,7 @@
 //! (a fused map's cells, a cell or two apart), the points themselves show the ground, and an
 //! obstacle the LiDAR hit is a hole of its own points. A disk that meets none of the regions'
 //! long-edged triangles covers only that shown ground, and bounds no safe circle
-//! ([`crate::Params::keep_out_trust_edge_m`]).
+//! ([`crate::CloudKind::keep_out_trust_edge_m`], two cells for a fused map).
 
 use crate::polylabel::{Disk, segment_distance2};
 use crate::ranking::KeepOut;

@@ -2,11 +2,15 @@
 //! random roofs with obstacles, ground and walls.
 
 use landing_geometry::synthetic::{Pcg32, Scene, SceneParams, SecondRoof, fuzz_detect_input};
+use landing_geometry::triangulation::{self, EMPTY, Triangulation};
 use landing_geometry::validation::{Location, check_detection, locate_in_ring};
 use landing_geometry::{
-    Detection, Disk, GeometryError, KeepClear, Params, Polygon, SemanticClass, TriangulationConfig,
-    Triangulator, detect, detect_keeping_out, detect_keeping_out_triangulated, detect_with,
+    Cloud, CloudKind, Detection, Disk, GeometryError, KeepClear, KeepOut, Params, Polygon,
+    SemanticClass, boundary, detect, filter, ranking, regions,
 };
+
+#[path = "support/spade.rs"]
+mod spade;
 
 /// `d` with its timings zeroed, for comparing detections.
 fn without_timings(mut d: Detection) -> Detection {
@@ -16,7 +20,20 @@ fn without_timings(mut d: Detection) -> Detection {
 
 /// Runs `detect` and checks every invariant of the result.
 fn run(points: &[[f32; 3]], classes: Option<&[u8]>, params: &Params) -> Detection {
-    let d = detect(points, classes, params).expect("detect");
+    let d = detect(&Cloud::new(points, classes), params).expect("detect");
+    check_detection(&d).expect("valid detection");
+    d
+}
+
+/// Runs `detect` on a fused map's cells of `cell_m` and checks every invariant of the result.
+fn run_fused(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    cell_m: f64,
+    params: &Params,
+) -> Detection {
+    let cloud = Cloud::new(points, classes).with_kind(CloudKind::FusedMap { cell_m });
+    let d = detect(&cloud, params).expect("detect");
     check_detection(&d).expect("valid detection");
     d
 }
@@ -205,22 +222,22 @@ fn degenerate_inputs_give_empty_results_or_typed_errors() {
     let mut bad = vec![[0.0f32, 0.0, 0.0]; 10];
     bad[7][2] = f32::NAN;
     assert!(matches!(
-        detect(&bad, None, &p),
+        detect(&Cloud::new(&bad, None), &p),
         Err(GeometryError::InvalidPoint { index: 7, .. })
     ));
     bad[7] = [f32::INFINITY, 0.0, 0.0];
     assert!(matches!(
-        detect(&bad, None, &p),
+        detect(&Cloud::new(&bad, None), &p),
         Err(GeometryError::InvalidPoint { index: 7, .. })
     ));
     bad[7] = [0.0, -2e7, 0.0];
     assert!(matches!(
-        detect(&bad, None, &p),
+        detect(&Cloud::new(&bad, None), &p),
         Err(GeometryError::InvalidPoint { index: 7, .. })
     ));
     bad[7] = [0.0, 0.0, 0.0];
     assert!(matches!(
-        detect(&bad, Some(&[4; 9]), &p),
+        detect(&Cloud::new(&bad, Some(&[4; 9])), &p),
         Err(GeometryError::ClassCountMismatch {
             points: 10,
             classes: 9
@@ -317,7 +334,7 @@ fn parameters_are_validated_with_field_names() {
         ),
     ];
     for (field, params) in cases {
-        match detect(&[], None, &params) {
+        match detect(&Cloud::new(&[], None), &params) {
             Err(GeometryError::InvalidParameter { field: f, .. }) => {
                 assert_eq!(f, field);
                 assert!(Params::option_name(f).is_some());
@@ -328,29 +345,14 @@ fn parameters_are_validated_with_field_names() {
     Params::default().validate().unwrap();
 }
 
-/// The parameters the service sets for fused streams (no `PipelineOptions` field) are checked too.
+/// A fused map's cell size is checked too, by name.
 #[test]
-fn fused_stream_parameters_out_of_range_are_refused_by_name() {
-    let cases = [
-        (
-            "midpoint_max_edge_m",
-            Params {
-                midpoint_max_edge_m: f64::INFINITY,
-                ..Params::default()
-            },
-        ),
-        (
-            "keep_out_trust_edge_m",
-            Params {
-                keep_out_trust_edge_m: -0.3,
-                ..Params::default()
-            },
-        ),
-    ];
-    for (field, params) in cases {
-        match detect(&[], None, &params) {
-            Err(GeometryError::InvalidParameter { field: f, .. }) => assert_eq!(f, field),
-            other => panic!("{field}: {other:?}"),
+fn fused_map_cell_sizes_out_of_range_are_refused_by_name() {
+    for cell_m in [f64::INFINITY, f64::NAN, -0.3, 0.0] {
+        let cloud = Cloud::new(&[], None).with_kind(CloudKind::FusedMap { cell_m });
+        match detect(&cloud, &Params::default()) {
+            Err(GeometryError::InvalidParameter { field: f, .. }) => assert_eq!(f, "cell_m"),
+            other => panic!("{cell_m}: {other:?}"),
         }
     }
 }
@@ -420,15 +422,17 @@ fn results_are_deterministic_and_triangulator_independent() {
         ..SceneParams::default()
     };
     let s = Scene::generate(&params, 21);
-    let a = without_timings(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
-    let b = without_timings(detect(&s.points, Some(&s.classes), &Params::default()).unwrap());
-    assert_eq!(a, b);
-    let spade = TriangulationConfig {
-        triangulator: Triangulator::Spade,
-    };
-    let c = without_timings(
-        detect_with(&s.points, Some(&s.classes), &Params::default(), &spade).unwrap(),
+    let a = without_timings(
+        detect(&Cloud::new(&s.points, Some(&s.classes)), &Params::default()).unwrap(),
     );
+    let b = without_timings(
+        detect(&Cloud::new(&s.points, Some(&s.classes)), &Params::default()).unwrap(),
+    );
+    assert_eq!(a, b);
+    let pts: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
+    let spade = spade::triangulate_spade(&pts);
+    let cloud = Cloud::new(&s.points, Some(&s.classes)).with_triangulation(&spade);
+    let c = without_timings(detect(&cloud, &Params::default()).unwrap());
     // Jittered points are in general position: the same Delaunay triangulation, so the same
     // polygons (canonical rings) and radii, whatever the triangle numbering.
     assert_eq!(a.triangle_count, c.triangle_count);
@@ -460,24 +464,22 @@ fn a_triangulation_made_beforehand_gives_the_same_detection() {
     };
     let params = Params::default();
     let made = without_timings(
-        detect_keeping_out(&s.points, Some(&s.classes), &params, keep_clear()).unwrap(),
-    );
-    let tri = landing_geometry::triangulate_points(&s.points).unwrap();
-    let given = without_timings(
-        detect_keeping_out_triangulated(
-            &s.points,
-            tri.clone(),
-            Some(&s.classes),
+        detect(
+            &Cloud::new(&s.points, Some(&s.classes)).with_keep_clear(keep_clear()),
             &params,
-            keep_clear(),
         )
         .unwrap(),
     );
+    let tri = landing_geometry::triangulate_points(&s.points).unwrap();
+    let cloud = Cloud::new(&s.points, Some(&s.classes))
+        .with_keep_clear(keep_clear())
+        .with_triangulation(&tri);
+    let given = without_timings(detect(&cloud, &params).unwrap());
     assert!(!made.sites.is_empty());
     assert_eq!(made, given);
     // A triangulation of other points is refused, not indexed out of bounds.
     let few = &s.points[..s.points.len() / 2];
-    let err = detect_keeping_out_triangulated(few, tri, None, &params, KeepClear::default());
+    let err = detect(&Cloud::new(few, None).with_triangulation(&tri), &params);
     assert!(
         matches!(err, Err(GeometryError::InvalidMesh { .. })),
         "{err:?}"
@@ -588,8 +590,11 @@ fn keep_out_disks_move_the_safe_circle_off_obstacles_the_points_missed() {
         disks: Some(&keep_out),
         points: None,
     };
-    let d =
-        detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear).expect("detect");
+    let d = detect(
+        &Cloud::new(&pts, Some(&classes)).with_keep_clear(keep_clear),
+        &Params::default(),
+    )
+    .expect("detect");
     check_detection(&d).expect("valid detection");
     let (point, normal) = planes.borrow()[0];
     assert!(
@@ -647,17 +652,18 @@ fn keep_out_disks_bound_circles_only_over_gaps_in_dense_points() {
         center: [c[0], c[1]],
         radius: 0.5,
     };
-    let with = |disks: Vec<Disk>, trust: f64| {
+    // The lattice's points are all roof, and no triangle of it is steep: a fused map's pinholes
+    // and midpoint edges change nothing here, only which disks count.
+    let with = |disks: Vec<Disk>, kind: CloudKind| {
         let keep_out = move |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
         let keep_clear = KeepClear {
             disks: Some(&keep_out),
             points: None,
         };
-        let params = Params {
-            keep_out_trust_edge_m: trust,
-            ..Params::default()
-        };
-        let d = detect_keeping_out(&pts, Some(&classes), &params, keep_clear).expect("detect");
+        let cloud = Cloud::new(&pts, Some(&classes))
+            .with_keep_clear(keep_clear)
+            .with_kind(kind);
+        let d = detect(&cloud, &Params::default()).expect("detect");
         check_detection(&d).expect("valid detection");
         d
     };
@@ -666,19 +672,24 @@ fn keep_out_disks_bound_circles_only_over_gaps_in_dense_points() {
         (s.center[0] - disk.center[0]).hypot(s.center[1] - disk.center[1]) - disk.radius
             >= s.safe_radius_m - 1e-9
     };
-    // Every disk counts by default: the circle leaves the centre.
-    let every = with(vec![in_gap, on_points], 0.0);
+    // Every disk counts in a scan: the circle leaves the centre.
+    let scan = CloudKind::Scan;
+    let every = with(vec![in_gap, on_points], scan);
     assert!(clear_of(&every, &on_points) && clear_of(&every, &in_gap));
     assert!(every.sites[0].safe_radius_m < plain.sites[0].safe_radius_m);
-    // Trusting edges of up to 1.5 m, the disk on dense points bounds nothing; the one in the gap
-    // still does.
-    let trusted = with(vec![in_gap, on_points], 1.5);
-    assert_eq!(trusted.sites, with(vec![in_gap], 0.0).sites);
+    // Trusting edges of up to 1.5 m (two cells of 0.75 m), the disk on dense points bounds
+    // nothing; the one in the gap still does.
+    let trusted = with(
+        vec![in_gap, on_points],
+        CloudKind::FusedMap { cell_m: 0.75 },
+    );
+    assert_eq!(trusted.sites, with(vec![in_gap], scan).sites);
     assert!(clear_of(&trusted, &in_gap));
     assert!(trusted.sites[0].safe_radius_m > every.sites[0].safe_radius_m);
     // Trusting edges as long as the gap's, no disk bounds anything: the limit must stay below
     // the gaps an obstacle leaves.
-    assert_eq!(with(vec![in_gap, on_points], 4.0).sites, plain.sites);
+    let wide = CloudKind::FusedMap { cell_m: 2.0 };
+    assert_eq!(with(vec![in_gap, on_points], wide).sites, plain.sites);
 }
 
 #[test]
@@ -698,8 +709,11 @@ fn safe_circles_keep_off_the_triangles_of_flagged_points() {
             disks: None,
             points: Some(&flags),
         };
-        let d = detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear)
-            .expect("detect");
+        let d = detect(
+            &Cloud::new(&pts, Some(&classes)).with_keep_clear(keep_clear),
+            &Params::default(),
+        )
+        .expect("detect");
         check_detection(&d).expect("valid detection");
         for s in &d.sites {
             assert_eq!(
@@ -739,7 +753,11 @@ fn safe_circles_keep_off_the_triangles_of_flagged_points() {
         points: Some(&short),
     };
     assert_eq!(
-        detect_keeping_out(&pts, Some(&classes), &Params::default(), keep_clear).unwrap_err(),
+        detect(
+            &Cloud::new(&pts, Some(&classes)).with_keep_clear(keep_clear),
+            &Params::default()
+        )
+        .unwrap_err(),
         GeometryError::FlagCountMismatch {
             points: pts.len(),
             flags: pts.len() - 1
@@ -794,13 +812,14 @@ fn property_flagged_points_keep_circles_off_their_triangles() {
             disks: None,
             points: Some(&flags),
         };
-        let d = detect_keeping_out(&s.points, Some(&s.classes), &Params::default(), keep_clear)
-            .expect("detect");
+        let d = detect(
+            &Cloud::new(&s.points, Some(&s.classes)).with_keep_clear(keep_clear),
+            &Params::default(),
+        )
+        .expect("detect");
         check_detection(&d).expect("valid detection");
         let pts: Vec<[f64; 3]> = s.points.iter().map(|p| p.map(f64::from)).collect();
-        let tri =
-            landing_geometry::triangulation::triangulate(&pts, &TriangulationConfig::default())
-                .expect("triangulate");
+        let tri = landing_geometry::triangulation::triangulate(&pts).expect("triangulate");
         let flagged: Vec<[[f64; 2]; 3]> = tri
             .triangles
             .chunks_exact(3)
@@ -849,15 +868,12 @@ fn fuzz_regression_tiny_hole_is_valid() {
 
 /// Dense, noisy roofs, as a fused map's cells are (points about 0.18 m apart, 2.5 cm of range
 /// noise): the noise tilts short triangles past `dot_min`, and the pinholes it punches hold no
-/// point. With `close_pinholes` every hole left holds a point of the cloud, and no obstacle point
-/// is inside a site; without it (the default, a single scan's) some of the pinholes stay.
+/// point. As a fused map (pinholes closed, `regions::close_pinholes`) every hole left holds a point
+/// of the cloud, and no obstacle point is inside a site; as a single scan some of the pinholes
+/// stay.
 #[test]
 fn property_dense_noisy_roofs_lose_their_pinholes_not_their_obstacles() {
     let mut g = Pcg32::new(77);
-    let closing = Params {
-        close_pinholes: true,
-        ..Params::default()
-    };
     let mut pinholes_left_open = 0;
     for case in 0..6u64 {
         let params = SceneParams {
@@ -880,7 +896,7 @@ fn property_dense_noisy_roofs_lose_their_pinholes_not_their_obstacles() {
                 .count()
         };
         pinholes_left_open += empty_holes(&run(&s.points, Some(&s.classes), &Params::default()));
-        let d = run(&s.points, Some(&s.classes), &closing);
+        let d = run_fused(&s.points, Some(&s.classes), s.spacing_m, &Params::default());
         assert!(!d.sites.is_empty(), "case {case}");
         assert_eq!(empty_holes(&d), 0, "case {case}: a hole holds no point");
         for site in &d.sites {
@@ -893,21 +909,15 @@ fn property_dense_noisy_roofs_lose_their_pinholes_not_their_obstacles() {
 }
 
 /// A lone obstacle point in a lattice roof: its hole is the hexagon of its six neighbours, the
-/// triangles that touch it. With midpoint edges the hole runs through the midpoints between the
-/// obstacle and each neighbour instead (the two detours of each pair of neighbouring triangles
-/// meet there), and the safe circle does not move.
+/// triangles that touch it. As a fused map's cells (midpoint edges of two cells; the lattice has
+/// no pinhole) the hole runs through the midpoints between the obstacle and each neighbour
+/// instead (the two detours of each pair of neighbouring triangles meet there), and the safe
+/// circle does not move.
 #[test]
 fn an_obstacle_hole_ends_halfway_to_the_obstacle_and_the_circle_stays() {
     let (pts, classes) = lattice(12, 12, &[(5, 5)]);
     let plain = run(&pts, Some(&classes), &Params::default());
-    let grown = run(
-        &pts,
-        Some(&classes),
-        &Params {
-            midpoint_max_edge_m: 1.5,
-            ..Params::default()
-        },
-    );
+    let grown = run_fused(&pts, Some(&classes), 0.75, &Params::default());
     assert_eq!(plain.sites.len(), 1);
     assert_eq!(grown.sites.len(), 1);
     let (p, g) = (&plain.sites[0], &grown.sites[0]);
@@ -927,33 +937,19 @@ fn an_obstacle_hole_ends_halfway_to_the_obstacle_and_the_circle_stays() {
     let hexagon = 3.0 * 3f64.sqrt() / 2.0;
     assert!((g.area_m2 - (p.area_m2 + 0.75 * hexagon)).abs() < 1e-4);
     // Beyond the limit nothing moves.
-    let short = run(
-        &pts,
-        Some(&classes),
-        &Params {
-            midpoint_max_edge_m: 0.9,
-            ..Params::default()
-        },
-    );
+    let short = run_fused(&pts, Some(&classes), 0.45, &Params::default());
     assert_eq!(short.sites[0].polygon, p.polygon);
 }
 
 /// Dense, noisy roofs with obstacles and walls, as a fused map's cells are: with midpoint edges
 /// every site keeps its circle, its polygon stays valid and holds the polygon of its own points,
-/// reaches at most half the limit beyond it, and holds no obstacle point. Without them the
-/// polygons are smaller (so the test can fail).
+/// reaches at most half the limit beyond it, and holds no obstacle point. Without them (the same
+/// steps by hand, pinholes closed) the polygons are smaller (so the test can fail).
 #[test]
 fn property_midpoint_edges_grow_polygons_not_circles() {
     let mut g = Pcg32::new(91);
     let max_edge = 0.5;
-    let base = Params {
-        close_pinholes: true,
-        ..Params::default()
-    };
-    let midpoints = Params {
-        midpoint_max_edge_m: max_edge,
-        ..base.clone()
-    };
+    let geometry = Params::default();
     let mut grown_by = 0.0;
     for case in 0..6u64 {
         let params = SceneParams {
@@ -966,12 +962,18 @@ fn property_midpoint_edges_grow_polygons_not_circles() {
         };
         let s = Scene::generate(&params, case);
         let xy = |i: usize| [f64::from(s.points[i][0]), f64::from(s.points[i][1])];
-        let plain = run(&s.points, Some(&s.classes), &base);
-        let grown = run(&s.points, Some(&s.classes), &midpoints);
+        let plain = sites_with_pinholes_closed(&s.points, Some(&s.classes), &geometry, None);
+        let grown = run_fused(&s.points, Some(&s.classes), max_edge / 2.0, &geometry);
         assert!(!plain.sites.is_empty(), "case {case}");
         // Every region's grown polygon is valid as built: `detect`'s fallback to the polygon of
         // the region's own points is never needed here.
-        for (r, polygon) in grown_region_polygons(&s.points, Some(&s.classes), &midpoints)
+        let (tri, pts, regions) =
+            regions_with_pinholes_closed(&s.points, Some(&s.classes), &geometry);
+        let grow = boundary::BoundaryParams {
+            midpoint_max_edge_m: max_edge,
+        };
+        for (r, polygon) in boundary::region_polygons(&tri, &pts, &regions, &grow)
+            .unwrap()
             .iter()
             .enumerate()
         {
@@ -1020,9 +1022,10 @@ fn property_midpoint_edges_grow_polygons_not_circles() {
 
 /// Dense, noisy roofs, as a fused map's cells are, where the LiDAR missed one obstacle (no
 /// point on or under it) and a camera saw every obstacle, and also something on open roof that
-/// is not there. With the trust limit `L`, a safe circle reaches at most `L/√3` into the missed
-/// obstacle (deeper, its points lie in a triangle with an edge over `L`, whose disks count), and
-/// the disks on dense points bound nothing, so the circles grow (the test fails without it).
+/// is not there. As a fused map, with the trust limit `L` of two cells, a safe circle reaches at
+/// most `L/√3` into the missed obstacle (deeper, its points lie in a triangle with an edge over
+/// `L`, whose disks count), and the disks on dense points bound nothing, so the circles grow over
+/// those of the same steps with every disk counted (the test fails without it).
 #[test]
 fn property_keep_out_disks_count_over_gaps_not_over_dense_points() {
     let mut g = Pcg32::new(17);
@@ -1081,24 +1084,20 @@ fn property_keep_out_disks_count_over_gaps_not_over_dense_points() {
                 });
             }
         }
-        let with = |trust: f64| {
-            let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
-            let keep_clear = KeepClear {
-                disks: Some(&keep_out),
-                points: None,
-            };
-            let params = Params {
-                close_pinholes: true,
-                keep_out_trust_edge_m: trust,
-                ..Params::default()
-            };
-            let d =
-                detect_keeping_out(&points, Some(&classes), &params, keep_clear).expect("detect");
-            check_detection(&d).expect("valid detection");
-            d
+        let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
+        let keep_clear = KeepClear {
+            disks: Some(&keep_out),
+            points: None,
         };
-        let every = with(0.0);
-        let trusted = with(limit);
+        let geometry = Params::default();
+        let every = sites_with_pinholes_closed(&points, Some(&classes), &geometry, Some(&keep_out));
+        let cloud = Cloud::new(&points, Some(&classes))
+            .with_keep_clear(keep_clear)
+            .with_kind(CloudKind::FusedMap {
+                cell_m: s.spacing_m,
+            });
+        let trusted = detect(&cloud, &geometry).expect("detect");
+        check_detection(&trusted).expect("valid detection");
         assert!(!trusted.sites.is_empty(), "case {case}");
         for site in &trusted.sites {
             // How deep the circle reaches into the missed obstacle, on a 1 cm grid.
@@ -1134,26 +1133,45 @@ fn property_keep_out_disks_count_over_gaps_not_over_dense_points() {
     );
 }
 
-/// The steps of `detect` up to the polygons, with `params`' midpoint edges.
-fn grown_region_polygons(
+/// The steps of `detect` up to the regions, with pinholes closed as for a fused map: the
+/// triangulation, the points in double precision and the regions.
+fn regions_with_pinholes_closed(
     points: &[[f32; 3]],
     classes: Option<&[u8]>,
     params: &Params,
-) -> Vec<Polygon> {
-    use landing_geometry::{boundary, filter, regions, triangulation};
-    let pts: Vec<[f64; 3]> = points
-        .iter()
-        .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
-        .collect();
-    let tri = triangulation::triangulate(&pts, &TriangulationConfig::default()).unwrap();
+) -> (Triangulation, Vec<[f64; 3]>, regions::Regions) {
+    let pts: Vec<[f64; 3]> = points.iter().map(|p| p.map(f64::from)).collect();
+    let tri = triangulation::triangulate(&pts).unwrap();
     let keep = filter::filter_triangles(&tri, &pts, classes, &filter::FilterParams::from(params));
     let region_params = regions::RegionParams {
         min_triangles: params.min_region_triangles,
     };
     let mut regions = regions::extract_regions(&tri, &pts, keep, &region_params).unwrap();
     regions::close_pinholes(&tri, &pts, &mut regions, params.l_max_m, params.z_min_m);
-    let grow = boundary::BoundaryParams {
-        midpoint_max_edge_m: params.midpoint_max_edge_m,
+    (tri, pts, regions)
+}
+
+/// The steps of `detect` done by hand, with a fused map's pinholes closed but the paper's
+/// polygons and every keep-out disk counted (which no [`CloudKind`] asks for), its invariants
+/// checked: to compare the other two mechanisms of a fused map with.
+fn sites_with_pinholes_closed(
+    points: &[[f32; 3]],
+    classes: Option<&[u8]>,
+    params: &Params,
+    disks: Option<&dyn KeepOut>,
+) -> Detection {
+    let (tri, pts, regions) = regions_with_pinholes_closed(points, classes, params);
+    let polygons =
+        boundary::region_polygons(&tri, &pts, &regions, &boundary::BoundaryParams::default())
+            .unwrap();
+    let ranking = ranking::RankingParams::from(params);
+    let sites = ranking::rank_sites(&regions, polygons, None, &ranking, disks).unwrap();
+    let d = Detection {
+        sites,
+        point_count: points.len(),
+        triangle_count: tri.len(),
+        ..Detection::default()
     };
-    boundary::region_polygons(&tri, &pts, &regions, &grow).unwrap()
+    check_detection(&d).expect("valid detection");
+    d
 }

@@ -2,18 +2,13 @@
 //! (many cocircular points), collinear and duplicate-heavy input.
 
 use landing_geometry::synthetic::Pcg32;
-use landing_geometry::{
-    Triangulation, TriangulationConfig, Triangulator, triangulation::triangulate,
-};
+use landing_geometry::triangulation::{EMPTY, Triangulation, triangulate};
 
-fn run(points: &[[f64; 3]], which: Triangulator) -> Triangulation {
-    triangulate(
-        points,
-        &TriangulationConfig {
-            triangulator: which,
-        },
-    )
-    .unwrap()
+#[path = "support/spade.rs"]
+mod spade;
+
+fn run(points: &[[f64; 3]]) -> Triangulation {
+    triangulate(points).unwrap()
 }
 
 fn xy(points: &[[f64; 3]]) -> Vec<[f64; 2]> {
@@ -34,10 +29,10 @@ fn distinct(points: &[[f64; 3]]) -> usize {
 /// Checks ours fully (structure, Delaunay, every distinct point used) and compares the triangle
 /// count with spade's.
 fn check(points: &[[f64; 3]], what: &str) -> Triangulation {
-    let ours = run(points, Triangulator::SweepHull);
+    let ours = run(points);
     ours.check_invariants(&xy(points), true)
         .unwrap_or_else(|e| panic!("{what}: {e}"));
-    let spade = run(points, Triangulator::Spade);
+    let spade = spade::triangulate_spade(points);
     spade
         .check_invariants(&xy(points), true)
         .unwrap_or_else(|e| panic!("{what} (spade): {e}"));
@@ -133,9 +128,9 @@ fn points_on_circles() {
 
 #[test]
 fn degenerate_inputs() {
-    assert!(run(&[], Triangulator::SweepHull).is_empty());
-    assert!(run(&[[0.0, 0.0, 0.0]], Triangulator::SweepHull).is_empty());
-    assert!(run(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]], Triangulator::SweepHull).is_empty());
+    assert!(run(&[]).is_empty());
+    assert!(run(&[[0.0, 0.0, 0.0]]).is_empty());
+    assert!(run(&[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]).is_empty());
     let collinear: Vec<[f64; 3]> = (0..100)
         .map(|i| [f64::from(i), 2.0 * f64::from(i), 0.0])
         .collect();

@@ -1,13 +1,15 @@
 //! The in-process pipeline: one validated frame in, ranked landing sites in world coordinates out.
 //!
-//! Synchronous and free of tonic types: the service calls [`run_pipeline`] on its worker pool,
-//! and tests and benchmarks call it directly to compare with what the service answers.
+//! Synchronous and free of tonic types: the service calls [`run_pipeline`] (a frame judged alone)
+//! or [`run_fused`] (a fused stream's frame, with the stream's map; its steps in `fused.rs`) on
+//! its worker pool, and tests and benchmarks call them directly to compare with what the service
+//! answers.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use landing_fusion::{Correction, FusionMap, NotRegistered, Scan, View};
-use landing_geometry::{Disk, KeepClear, Params, Triangulation};
+use landing_fusion::{Correction, FusionMap, NotRegistered};
+use landing_geometry::{CloudKind, Disk, KeepClear, Params, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
@@ -17,6 +19,9 @@ pub use crate::frame::{
 };
 use crate::geodetic::{Geodetic, enu_to_geodetic};
 use crate::segmentation::{self, Judged, PointView, Segmenter};
+
+mod fused;
+pub use fused::run_fused;
 
 /// Time spent in each step; `None` for steps that did not run.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -216,8 +221,9 @@ pub fn run_pipeline(
     )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let located = Located {
-        world: &c.world,
+        points: &c.points,
         classes: c.classes.as_deref(),
+        kind: CloudKind::Scan,
         keep_out: &keep_out,
         unresolved: &[],
         origin,
@@ -225,160 +231,6 @@ pub fn run_pipeline(
         triangulated: None,
     };
     locate(frame, located, c.mode, c.timings, start)
-}
-
-/// Runs the pipeline on a fused stream's frame: the frame's points are added to the stream's
-/// `map` and its top surface triangulated on a second thread while the frame is classified
-/// ([`Judged::InStream`]), its classes then vote, and the answer is computed from all the map's
-/// points (what the approach has scanned so far), keeping clear of the keep-out footprints of
-/// every frame the map remembers, with the pinholes of its dense planes closed
-/// (`Params::close_pinholes`) and its polygons' edges halfway to the first point that is not
-/// theirs (`Params::midpoint_max_edge_m`).
-/// `reset` starts the map over first. A frame without a timestamp counts as taken at the
-/// previous frame's time. The frame-local coordinates are the map's own (its origin), so that
-/// the keep-out footprints of every kept frame share them.
-pub fn run_fused(
-    frame: &Frame,
-    options: &FrameOptions,
-    pipeline: &Pipeline,
-    map: &mut StreamMap,
-    reset: bool,
-) -> Result<FrameOutput, Error> {
-    let start = Instant::now();
-    // The map bins in double precision.
-    let mut points = to_world(&frame.cloud);
-    let time_s = frame
-        .timestamp
-        .map(|t| t.seconds as f64 + f64::from(t.nanos) * 1e-9)
-        .or(map.last_time_s())
-        .unwrap_or(0.0);
-    let mut sensor = Point3::from(frame.cloud.pose.translation.vector);
-    let scan = Scan {
-        time_s,
-        sensor: sensor.into(),
-        reset,
-        ..Scan::new(&frame.drone_id)
-    };
-    // Lay the scan onto the map first: the frame's poses (LiDAR and cameras alike, one rigid
-    // body) move by the correction, so its classes and keep-out footprints land where its points
-    // do. A map about to start over has nothing to register to.
-    let registration = match map.would_reset(&scan) {
-        Some(_) => Err(NotRegistered::Nothing),
-        None => map.register(&points, scan.sensor),
-    };
-    let mut fusion_time = start.elapsed();
-    let correction = registration
-        .as_ref()
-        .map_or_else(|_| Isometry3::identity(), Correction::isometry);
-    if registration.is_ok() {
-        for p in &mut points {
-            *p = (correction * Point3::from(*p)).into();
-        }
-        sensor = correction * sensor;
-    }
-    let scan = Scan {
-        sensor: sensor.into(),
-        points: &points,
-        ..scan
-    };
-    let origin = map.origin_for(&scan);
-    let by = to_local(origin) * correction;
-    // What can be wrong with the frame's input is found before the map changes.
-    let decoded = decode(frame, options, pipeline)?;
-    // The frame's classes (the segmentation model's work) are made on this thread while another
-    // adds the scan's points to the map and triangulates its top surface: votes do not move the
-    // map's points. The answer covers everything the map holds: what the approach has scanned
-    // of the roof (and around it) within the horizon, not only the current scan's footprint,
-    // which shrinks as the drone descends.
-    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
-    let (classified, surfaced) = std::thread::scope(|threads| {
-        let surfacing = threads.spawn(|| {
-            let t = Instant::now();
-            let placed = map.place(&scan);
-            let surface = map.surface(everything);
-            let world = relative_to(&surface.points, origin);
-            let placing = t.elapsed();
-            let t = Instant::now();
-            let tri = landing_geometry::triangulate_points(&world);
-            (placed, surface, world, tri, placing, t.elapsed())
-        });
-        let classified = classify(
-            frame,
-            decoded,
-            &by,
-            relative_to(&points, origin),
-            options,
-            pipeline,
-            Judged::InStream,
-        );
-        (classified, surfacing.join())
-    });
-    let Ok((placed, surface, world, tri, placing, triangulation)) = surfaced else {
-        map.clear();
-        return Err(Error::Internal("fusing the frame's points panicked".into()));
-    };
-    let mut c = match classified {
-        Ok(c) => c,
-        Err(e) => {
-            // The scan's points are in and its classes cannot be: start the map over.
-            map.clear();
-            return Err(e);
-        }
-    };
-    let map_start = Instant::now();
-    // How finely the frame's camera saw each place (the map's positions are world ones, the
-    // view's frame-local): safe circles keep clear of what no fine view has seen.
-    let local = to_local(origin);
-    let footprint = c.view.as_ref().map(|view| {
-        move |p: &[f64; 3]| view.footprint_on_level_ground(&(local * Point3::from(*p)))
-    });
-    let reset = map.vote(
-        placed,
-        Scan {
-            classes: c.classes.as_deref(),
-            view: footprint.as_ref().map(|f| View(f)),
-            keep_out: c.obstacles.take(),
-            ..scan
-        },
-    );
-    let landable = &options.params.landable_classes;
-    let (classes, unresolved) = map.classes_of(&surface, |class| landable.contains(&class));
-    fusion_time += placing + map_start.elapsed();
-    c.timings.fusion = Some(fusion_time);
-    let keep_out: Vec<&ObstacleRays> = map.keep_outs().collect();
-    let summary = FusionSummary {
-        frames: map.frames(),
-        points: world.len(),
-        cells: map.cells(),
-        registration,
-        reset: reset.map(|r| r.to_string()),
-        keep_out_frames: keep_out.len(),
-    };
-    // The map's cells are dense: range noise punches pinholes into its planes, and a polygon of
-    // its last landable cells ends a cell inside the edge, so it ends halfway to the first cell
-    // that is not landable, where that is a cell or two away (the circles stay as they were).
-    // Where its landable cells lie within two cells of each other they show the roof itself, and
-    // the keep-out footprints there bound no circle: an obstacle that no scan hit leaves a wider
-    // gap, where they still do.
-    let cells = 2.0 * map.params().cell_m;
-    let params = Params {
-        close_pinholes: true,
-        midpoint_max_edge_m: cells,
-        keep_out_trust_edge_m: cells,
-        ..options.params.clone()
-    };
-    let located = Located {
-        world: &world,
-        classes: classes.as_deref(),
-        keep_out: &keep_out,
-        unresolved: &unresolved,
-        origin,
-        params: &params,
-        triangulated: Some((tri?, triangulation)),
-    };
-    let mut out = locate(frame, located, c.mode, c.timings, start)?;
-    out.fusion = Some(summary);
-    Ok(out)
 }
 
 /// The move from world coordinates to those relative to `origin`.
@@ -397,7 +249,7 @@ fn relative_to(points: &[[f64; 3]], origin: [f64; 3]) -> Vec<[f32; 3]> {
 /// A frame's points with their classes, before geometry.
 struct Classified {
     /// The cloud in frame-local coordinates.
-    world: Vec<[f32; 3]>,
+    points: Vec<[f32; 3]>,
     classes: Option<Vec<u8>>,
     /// The class mask's obstacle pixels, when a mask classified the points.
     obstacles: Option<ObstacleRays>,
@@ -437,13 +289,13 @@ fn decode(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<
 }
 
 /// Classifies the [`decode`]d frame's points per the mode and how the frame is `judged`
-/// ([`Judged`]). `world` is the cloud in the coordinates the frame's poses give once moved by
-/// `by` (frame-local ones from the callers above); the frame itself is not copied.
+/// ([`Judged`]). `points` is the cloud in the coordinates the frame's poses give once moved by
+/// `by` (frame-local ones from the callers); the frame itself is not copied.
 fn classify(
     frame: &Frame,
     decoded: Decoded,
     by: &Isometry3<f64>,
-    world: Vec<[f32; 3]>,
+    points: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
     judged: Judged,
@@ -471,7 +323,7 @@ fn classify(
                 _ => return Err(Error::Internal("model mode without image or model".into())),
             };
             let out =
-                segmenter.classify(camera, by * camera.pose, rgb, &world, landable, judged)?;
+                segmenter.classify(camera, by * camera.pose, rgb, &points, landable, judged)?;
             timings.segmentation = Some(out.segmentation);
             timings.classification = Some(out.classification);
             obstacles = Some(out.obstacles);
@@ -488,7 +340,7 @@ fn classify(
                 camera,
                 by * camera.pose,
                 mask,
-                &world,
+                &points,
                 landable,
                 judged,
             );
@@ -501,7 +353,7 @@ fn classify(
         SegmentationMode::None | SegmentationMode::Auto => None,
     };
     Ok(Classified {
-        world,
+        points,
         classes,
         obstacles,
         view,
@@ -510,12 +362,14 @@ fn classify(
     })
 }
 
-/// What the geometry runs on: frame-local points, their classes, the obstacle rays whose
-/// footprints safe circles keep clear of (in the same coordinates), and the world position of
-/// their origin.
+/// What the geometry runs on: frame-local points, their classes, what kind of cloud they are, the
+/// obstacle rays whose footprints safe circles keep clear of (in the same coordinates), and the
+/// world position of their origin.
 struct Located<'a> {
-    world: &'a [[f32; 3]],
+    points: &'a [[f32; 3]],
     classes: Option<&'a [u8]>,
+    /// A frame's scan, or a fused stream's map.
+    kind: CloudKind,
     keep_out: &'a [&'a ObstacleRays],
     /// Per point (empty for none): on landable ground no camera has seen finely enough yet
     /// (`landing_fusion::Fused::unresolved`). Safe circles keep off every triangle with such a
@@ -525,7 +379,7 @@ struct Located<'a> {
     /// roof).
     unresolved: &'a [bool],
     origin: [f64; 3],
-    /// The request's parameters, or the fused stream's form of them.
+    /// The request's parameters.
     params: &'a Params,
     /// The points' triangulation and its time, when it was made beforehand.
     triangulated: Option<(Triangulation, Duration)>,
@@ -539,74 +393,19 @@ fn locate(
     mut timings: StageTimings,
     start: Instant,
 ) -> Result<FrameOutput, Error> {
-    let Located {
-        world,
-        classes,
-        keep_out,
-        unresolved,
-        origin,
-        params,
-        triangulated,
-    } = input;
-
-    // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
-    // what fell between the LiDAR's scan lines.
-    let (given, triangulation) = triangulated.unzip();
-    let detection = if keep_out.is_empty() && unresolved.is_empty() && given.is_none() {
-        landing_geometry::detect(world, classes, params)?
-    } else {
-        // A fused stream keeps several frames' rays, oldest first: where a newer camera sees,
-        // its view decides.
-        let disks = |point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]| {
-            ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
-                .into_iter()
-                .map(|(center, radius)| Disk { center, radius })
-                .collect()
-        };
-        let keep_clear = KeepClear {
-            disks: Some(&disks),
-            points: (!unresolved.is_empty()).then_some(unresolved),
-        };
-        match given {
-            Some(tri) => landing_geometry::detect_keeping_out_triangulated(
-                world, tri, classes, params, keep_clear,
-            )?,
-            None => landing_geometry::detect_keeping_out(world, classes, params, keep_clear)?,
-        }
-    };
+    let origin = input.origin;
+    let point_count = input.points.len();
+    let (detection, triangulation) = detect(input)?;
     let t = detection.timings;
     timings.triangulation = Some(triangulation.unwrap_or(t.triangulation));
     timings.triangle_filter = Some(t.triangle_filter);
     timings.plane_extraction = Some(t.plane_extraction);
     timings.polygon_extraction = Some(t.polygon_extraction);
     timings.polylabel = Some(t.polylabel);
-
     let sites = detection
         .sites
         .iter()
-        .map(|s| {
-            let [x0, y0, z0] = origin;
-            let z = s.plane_height_m + z0;
-            let ring = |r: &[[f64; 2]]| {
-                r.iter()
-                    .map(|p| [p[0] + x0, p[1] + y0, z])
-                    .collect::<Vec<_>>()
-            };
-            let center = std::array::from_fn(|i| s.center[i] + origin[i]);
-            Site {
-                rank: s.rank,
-                shell: ring(&s.polygon.shell),
-                holes: s.polygon.holes.iter().map(|h| ring(h)).collect(),
-                plane_height_m: z,
-                center,
-                center_geodetic: frame.geodetic_origin.map(|o| enu_to_geodetic(o, center)),
-                safe_radius_m: s.safe_radius_m,
-                area_m2: s.area_m2,
-                normal: s.normal,
-                point_count: s.point_count,
-                triangle_count: s.triangle_count,
-            }
-        })
+        .map(|s| in_world(s, origin, frame.geodetic_origin))
         .collect();
     timings.total = Some(start.elapsed());
     Ok(FrameOutput {
@@ -615,11 +414,77 @@ fn locate(
         timestamp: frame.timestamp,
         sites,
         segmentation_mode: mode,
-        point_count: world.len(),
+        point_count,
         triangle_count: detection.triangle_count,
         timings,
         fusion: None,
     })
+}
+
+/// Runs the geometry on `input`: the detection, and the time of the triangulation when it was
+/// made beforehand.
+fn detect(input: Located<'_>) -> Result<(landing_geometry::Detection, Option<Duration>), Error> {
+    let Located {
+        points,
+        classes,
+        kind,
+        keep_out,
+        unresolved,
+        origin: _,
+        params,
+        triangulated,
+    } = input;
+    let (given, triangulation) = triangulated.unzip();
+    // A fused stream keeps several frames' rays, oldest first: where a newer camera sees, its
+    // view decides.
+    let disks = |point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]| {
+        ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
+            .into_iter()
+            .map(|(center, radius)| Disk { center, radius })
+            .collect()
+    };
+    let mut cloud = landing_geometry::Cloud::new(points, classes).with_kind(kind);
+    // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
+    // what fell between the LiDAR's scan lines. (A fused map always has a triangulation given.)
+    if !(keep_out.is_empty() && unresolved.is_empty() && given.is_none()) {
+        cloud = cloud.with_keep_clear(KeepClear {
+            disks: Some(&disks),
+            points: (!unresolved.is_empty()).then_some(unresolved),
+        });
+    }
+    if let Some(tri) = &given {
+        cloud = cloud.with_triangulation(tri);
+    }
+    Ok((landing_geometry::detect(&cloud, params)?, triangulation))
+}
+
+/// A site found in frame-local coordinates relative to `origin`, in world coordinates.
+fn in_world(
+    s: &landing_geometry::LandingSite,
+    origin: [f64; 3],
+    geodetic_origin: Option<Geodetic>,
+) -> Site {
+    let [x0, y0, z0] = origin;
+    let z = s.plane_height_m + z0;
+    let ring = |r: &[[f64; 2]]| {
+        r.iter()
+            .map(|p| [p[0] + x0, p[1] + y0, z])
+            .collect::<Vec<_>>()
+    };
+    let center = std::array::from_fn(|i| s.center[i] + origin[i]);
+    Site {
+        rank: s.rank,
+        shell: ring(&s.polygon.shell),
+        holes: s.polygon.holes.iter().map(|h| ring(h)).collect(),
+        plane_height_m: z,
+        center,
+        center_geodetic: geodetic_origin.map(|o| enu_to_geodetic(o, center)),
+        safe_radius_m: s.safe_radius_m,
+        area_m2: s.area_m2,
+        normal: s.normal,
+        point_count: s.point_count,
+        triangle_count: s.triangle_count,
+    }
 }
 
 /// The cloud's points in the world frame, in double precision.

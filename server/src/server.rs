@@ -13,6 +13,7 @@ use landing_proto::v1::landing_service_server::LandingServiceServer;
 use tokio::net::TcpListener;
 use tokio::sync::{oneshot, watch};
 use tonic::service::interceptor::InterceptedService;
+use tonic::transport::server::Router;
 use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 
 use crate::auth::Auth;
@@ -141,26 +142,16 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
     };
     let foxglove_addr = live.as_ref().map(|l| l.addr);
     let tls = tls_config(&config)?;
-    let tokens = if config.auth.tokens_file.as_os_str().is_empty() {
-        None
-    } else {
-        Some(Arc::new(
-            read_tokens(&config.auth.tokens_file)?
-                .into_iter()
-                .collect::<HashSet<_>>(),
-        ))
-    };
+    let tokens = token_set(&config)?;
 
-    let workers = config.pipeline.workers();
     let dispatcher = Arc::new(Dispatcher::new(
         pipeline,
         config.pipeline.queue_capacity as usize,
         config.pipeline.max_queued_bytes,
-        workers,
+        config.pipeline.workers(),
         metrics.clone(),
     ));
     let (drain_tx, drain_rx) = watch::channel(false);
-    let max = usize::try_from(config.server.max_request_bytes).unwrap_or(usize::MAX);
     let service = LandingService {
         dispatcher: dispatcher.clone(),
         stream_buffer: config.pipeline.stream_buffer as usize,
@@ -169,6 +160,55 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         draining: drain_rx,
         live: live.clone(),
     };
+    let (health_reporter, router) = router(&config, service, tokens, tls).await?;
+
+    let (metrics_stop_tx, metrics_stop_rx) = oneshot::channel::<()>();
+    if let Some(l) = metrics_listener {
+        tokio::spawn(serve_metrics(l, metrics, async {
+            let _ = metrics_stop_rx.await;
+        }));
+    }
+    let (stop_tx, stop_rx) = oneshot::channel::<()>();
+    let serving = Serving {
+        router,
+        incoming: tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
+        stopping: Stopping {
+            health_reporter,
+            dispatcher,
+            drain: drain_tx,
+            metrics_stop: metrics_stop_tx,
+            live,
+            grace: Duration::from_secs_f64(config.server.shutdown_grace_s),
+        },
+    };
+    let task = tokio::spawn(serving.run(stop_rx));
+    Ok(RunningServer {
+        addr,
+        metrics_addr,
+        foxglove_addr,
+        shutdown: Some(stop_tx),
+        task,
+    })
+}
+
+/// The bearer tokens `auth.tokens_file` lists, or `None` (no auth) when it is not set.
+fn token_set(config: &Config) -> anyhow::Result<Option<Arc<HashSet<String>>>> {
+    if config.auth.tokens_file.as_os_str().is_empty() {
+        return Ok(None);
+    }
+    let tokens = read_tokens(&config.auth.tokens_file)?;
+    Ok(Some(Arc::new(tokens.into_iter().collect())))
+}
+
+/// Everything served, behind auth where it applies, with the health service reporting
+/// `landing.v1` as serving.
+async fn router(
+    config: &Config,
+    service: LandingService,
+    tokens: Option<Arc<HashSet<String>>>,
+    tls: Option<ServerTlsConfig>,
+) -> anyhow::Result<(tonic_health::server::HealthReporter, Router)> {
+    let max = usize::try_from(config.server.max_request_bytes).unwrap_or(usize::MAX);
     let landing = LandingServiceServer::new(service)
         .max_decoding_message_size(max)
         .max_encoding_message_size(max);
@@ -208,70 +248,92 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .add_service(reflection_v1)
         .add_service(reflection_v1alpha)
         .add_service(landing);
+    Ok((health_reporter, router))
+}
 
-    let (stop_tx, stop_rx) = oneshot::channel::<()>();
-    let (metrics_stop_tx, metrics_stop_rx) = oneshot::channel::<()>();
-    if let Some(l) = metrics_listener {
-        tokio::spawn(serve_metrics(l, metrics, async {
-            let _ = metrics_stop_rx.await;
-        }));
-    }
-    let grace = Duration::from_secs_f64(config.server.shutdown_grace_s);
-    let (tonic_stop_tx, tonic_stop_rx) = oneshot::channel::<()>();
-    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
-    let task = tokio::spawn(async move {
+/// A started server's parts, for its background task: serve until stopped, then drain.
+struct Serving {
+    router: Router,
+    incoming: tonic::transport::server::TcpIncoming,
+    stopping: Stopping,
+}
+
+/// What the server stops when it drains or fails.
+struct Stopping {
+    health_reporter: tonic_health::server::HealthReporter,
+    dispatcher: Arc<Dispatcher>,
+    /// Tells open streams to stop reading.
+    drain: watch::Sender<bool>,
+    metrics_stop: oneshot::Sender<()>,
+    live: Option<Arc<LiveView>>,
+    grace: Duration,
+}
+
+impl Serving {
+    /// Serves until `stop` (or the server fails), then drains: health NOT_SERVING, no new
+    /// frames, open streams stop reading, and in-flight frames get `grace` to finish.
+    async fn run(self, stop: oneshot::Receiver<()>) -> anyhow::Result<()> {
+        let Self {
+            router,
+            incoming,
+            stopping,
+        } = self;
+        let (tonic_stop_tx, tonic_stop_rx) = oneshot::channel::<()>();
         let server = router.serve_with_incoming_shutdown(incoming, async {
             let _ = tonic_stop_rx.await;
         });
         tokio::pin!(server);
         tokio::select! {
             r = &mut server => {
-                let _ = metrics_stop_tx.send(());
-                if let Some(live) = &live {
-                    live.stop().await;
-                }
+                stopping.side_services().await;
                 return r.context("the gRPC server failed");
             }
-            _ = stop_rx => {}
+            _ = stop => {}
         }
-        tracing::info!(
-            grace_s = grace.as_secs_f64(),
-            queued = dispatcher.queued(),
-            "draining"
-        );
-        health_reporter
-            .set_not_serving::<LandingServiceServer<LandingService>>()
-            .await;
-        health_reporter
-            .set_service_status("", tonic_health::ServingStatus::NotServing)
-            .await;
-        dispatcher.drain();
-        let _ = drain_tx.send(true);
+        stopping.refuse_new_frames().await;
         let _ = tonic_stop_tx.send(());
-        let result = match tokio::time::timeout(grace, &mut server).await {
+        let result = match tokio::time::timeout(stopping.grace, &mut server).await {
             Ok(r) => r.context("the gRPC server failed"),
             Err(_) => {
                 tracing::warn!(
-                    queued = dispatcher.queued(),
+                    queued = stopping.dispatcher.queued(),
                     "grace period over; closing with frames unfinished"
                 );
                 Ok(())
             }
         };
-        let _ = metrics_stop_tx.send(());
-        if let Some(live) = &live {
-            live.stop().await;
-        }
+        stopping.side_services().await;
         tracing::info!("stopped");
         result
-    });
-    Ok(RunningServer {
-        addr,
-        metrics_addr,
-        foxglove_addr,
-        shutdown: Some(stop_tx),
-        task,
-    })
+    }
+}
+
+impl Stopping {
+    /// Health goes NOT_SERVING, the dispatcher refuses new frames and open streams stop
+    /// reading.
+    async fn refuse_new_frames(&self) {
+        tracing::info!(
+            grace_s = self.grace.as_secs_f64(),
+            queued = self.dispatcher.queued(),
+            "draining"
+        );
+        self.health_reporter
+            .set_not_serving::<LandingServiceServer<LandingService>>()
+            .await;
+        self.health_reporter
+            .set_service_status("", tonic_health::ServingStatus::NotServing)
+            .await;
+        self.dispatcher.drain();
+        let _ = self.drain.send(true);
+    }
+
+    /// Stops the metrics endpoint and the live view.
+    async fn side_services(self) {
+        let _ = self.metrics_stop.send(());
+        if let Some(live) = &self.live {
+            live.stop().await;
+        }
+    }
 }
 
 /// A reflection builder describing everything served: the landing API, health and both

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use landing_geometry::SemanticClass;
 use landing_proto::v1;
-use tokio::sync::{mpsc, watch};
+use tokio::sync::{mpsc, oneshot, watch};
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
@@ -15,23 +15,9 @@ use crate::convert;
 use crate::live::LiveView;
 use crate::status::{to_rpc_status, to_status};
 use crate::telemetry::Rpc;
-use crate::workers::{Dispatcher, Done, FusionTurn, StreamFusion};
+use crate::workers::{Dispatcher, Done};
 
-/// A stream's frame in flight: its sequence, its computation, and the frame itself when a
-/// live viewer is watching (to be shown with its answer).
-type Pending = (
-    u64,
-    tokio::task::JoinHandle<Done>,
-    Option<(Arc<LiveView>, v1::Frame)>,
-);
-
-/// Whether a stream fuses, as its first message asked.
-enum Fusing {
-    Off,
-    On(Arc<StreamFusion>),
-    /// It asked with options this server refuses; every frame is answered with the error.
-    Refused(crate::Error),
-}
+mod stream;
 
 /// The service state shared by every call.
 #[derive(Debug, Clone)]
@@ -153,154 +139,23 @@ impl v1::landing_service_server::LandingService for LandingService {
         &self,
         request: Request<Streaming<v1::StreamLandingSitesRequest>>,
     ) -> Result<Response<Self::StreamLandingSitesStream>, Status> {
-        let deadline = deadline_of(&request);
-        let mut inbound = request.into_inner();
+        let session = stream::StreamSession::new(self.clone(), deadline_of(&request));
         let (out_tx, out_rx) = mpsc::channel(self.stream_buffer);
         // Frames in flight for this stream, in arrival order; its bound is the BLOCK back-pressure.
-        let (pending_tx, mut pending_rx) = mpsc::channel::<Pending>(self.stream_buffer);
-        // (arrival index, sequence) of the newest frame, for LATEST.
-        let (latest_tx, latest_rx) = watch::channel((0u64, 0u64));
-        let (cancel_tx, mut cancel_rx) = watch::channel(false);
+        let (pending_tx, pending_rx) = mpsc::channel(self.stream_buffer);
+        let (cancel_tx, cancel_rx) = watch::channel(false);
         // Why the input ended, when it broke (a message over `server.max_request_bytes`, one
         // that does not decode): the stream's final status, after every frame before it is
         // answered.
-        let (broken_tx, mut broken_rx) = tokio::sync::oneshot::channel::<Status>();
+        let (broken_tx, broken_rx) = oneshot::channel();
+        let inbound = request.into_inner();
         let dispatcher = self.dispatcher.clone();
-        let service = self.clone();
-        let fusion_defaults = self.fusion;
-        let mut draining = self.draining.clone();
         dispatcher.metrics.streams(1.0);
-
-        // Reader: validates, admits and starts each frame; stops on end of stream, error,
-        // cancellation or drain.
-        let reader_dispatcher = dispatcher.clone();
+        tokio::spawn(stream::read_frames(
+            session, inbound, cancel_rx, pending_tx, broken_tx,
+        ));
         tokio::spawn(async move {
-            let dispatcher = reader_dispatcher;
-            let mut latest_policy = None;
-            let mut fusing = None;
-            // The previous fused frame's signal: the next one fuses after it.
-            let mut previous = None;
-            let mut index = 0u64;
-            loop {
-                if *draining.borrow() {
-                    break;
-                }
-                let message = tokio::select! {
-                    m = inbound.message() => m,
-                    changed = draining.changed() => {
-                        if changed.is_err() {
-                            break;
-                        }
-                        continue;
-                    }
-                    _ = cancel_rx.changed() => break,
-                };
-                let mut request = match message {
-                    Ok(Some(r)) => r,
-                    Ok(None) => break,
-                    Err(status) => {
-                        tracing::debug!(%status, "stream input ended with an error");
-                        let _ = broken_tx.send(status);
-                        break;
-                    }
-                };
-                let latest = *latest_policy
-                    .get_or_insert(request.overflow_policy == v1::OverflowPolicy::Latest as i32);
-                let sequence = request.frame.as_ref().map_or(0, |f| f.sequence);
-                index += 1;
-                latest_tx.send_replace((index, sequence));
-                // The first message decides whether the stream fuses, and with what map.
-                let fusing = fusing.get_or_insert_with(|| match &request.fusion {
-                    Some(asked) if asked.enabled => {
-                        match convert::fusion_map(asked, &fusion_defaults) {
-                            Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
-                            Err(e) => Fusing::Refused(e),
-                        }
-                    }
-                    _ => Fusing::Off,
-                });
-                let (parts, turn) = match fusing {
-                    Fusing::Off => (
-                        convert::stream_parts(&request, &dispatcher.pipeline.defaults),
-                        None,
-                    ),
-                    Fusing::Refused(e) => (Err(e.clone()), None),
-                    Fusing::On(stream) => {
-                        let (done, next) = tokio::sync::oneshot::channel();
-                        let turn = FusionTurn {
-                            stream: stream.clone(),
-                            after: previous.replace(next),
-                            done,
-                            reset: request.reset_fusion,
-                        };
-                        (
-                            convert::stream_parts(&request, &dispatcher.pipeline.defaults),
-                            Some(turn),
-                        )
-                    }
-                };
-                let shown = service.watched().zip(request.frame.take());
-                drop(request);
-                let superseded: std::pin::Pin<Box<dyn std::future::Future<Output = u64> + Send>> =
-                    if latest {
-                        let mut rx = latest_rx.clone();
-                        let mine = index;
-                        Box::pin(async move {
-                            let newer = rx.wait_for(|(i, _)| *i > mine).await.map(|v| v.1);
-                            match newer {
-                                Ok(sequence) => sequence,
-                                Err(_) => std::future::pending().await,
-                            }
-                        })
-                    } else {
-                        Box::pin(never())
-                    };
-                let job = tokio::spawn(dispatcher.process(
-                    Rpc::Stream,
-                    parts,
-                    deadline,
-                    superseded,
-                    turn,
-                ));
-                if pending_tx.send((sequence, job, shown)).await.is_err() {
-                    break;
-                }
-            }
-        });
-
-        // Writer: answers in order, one response per frame; on cancellation aborts what is left.
-        tokio::spawn(async move {
-            let abort_rest = |rx: &mut mpsc::Receiver<Pending>| {
-                rx.close();
-                while let Ok((_, job, _)) = rx.try_recv() {
-                    job.abort();
-                }
-            };
-            while let Some((sequence, mut job, shown)) = pending_rx.recv().await {
-                let done = tokio::select! {
-                    joined = &mut job => match joined {
-                        Ok(done) => done,
-                        Err(e) => Done::Failed(crate::Error::Internal(format!("frame task failed: {e}"))),
-                    },
-                    () = out_tx.closed() => {
-                        job.abort();
-                        break;
-                    }
-                };
-                let response = stream_response(sequence, done);
-                if let Some((live, frame)) = shown {
-                    live.show(frame, response.clone());
-                }
-                if out_tx.send(Ok(response)).await.is_err() {
-                    break;
-                }
-            }
-            // The reader sent its error, if any, before it let go of `pending_tx`.
-            if let Ok(status) = broken_rx.try_recv() {
-                let _ = out_tx.send(Err(status)).await;
-            }
-            let _ = cancel_tx.send(true);
-            abort_rest(&mut pending_rx);
+            stream::write_answers(pending_rx, out_tx, broken_rx, cancel_tx).await;
             dispatcher.metrics.streams(-1.0);
         });
         Ok(Response::new(ReceiverStream::new(out_rx)))

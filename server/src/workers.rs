@@ -3,6 +3,7 @@
 //! LATEST policy, and every metric.
 
 use std::future::Future;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -60,6 +61,26 @@ impl StreamFusion {
             bytes: AtomicUsize::new(0),
             metrics: metrics.clone(),
         })
+    }
+}
+
+impl StreamFusion {
+    /// Computes `frame` from the stream's map (its fusion turn has come), and counts what the
+    /// map holds after it on the memory gauge.
+    fn fuse(
+        &self,
+        frame: &Frame,
+        options: &FrameOptions,
+        pipeline: &Pipeline,
+        reset: bool,
+    ) -> Result<FrameOutput, Error> {
+        let mut map = self.map.lock().unwrap_or_else(|e| e.into_inner());
+        let out = run_fused(frame, options, pipeline, &mut map, reset);
+        let bytes = map_bytes(&map);
+        drop(map);
+        let before = self.bytes.swap(bytes, Ordering::Relaxed);
+        self.metrics.fusion_bytes(bytes as f64 - before as f64);
+        out
     }
 }
 
@@ -248,26 +269,10 @@ impl Dispatcher {
         };
         tokio::pin!(expired);
         tokio::pin!(superseded);
-        // A fused frame waits for the previous one's fusion before it takes a worker, so that a
-        // stream never holds a worker while it waits for itself. A frame skipped or expired
-        // while it waits is not fused: fusing it needs its segmentation, the very work skipping
-        // saves, and its points without classes would add geometry no class vouches for.
-        if let Some(after) = fusion.as_mut().and_then(|f| f.after.take()) {
-            tokio::select! {
-                biased;
-                _ = after => {}
-                by = &mut superseded => return Done::Skipped { superseded_by: by },
-                () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
-            }
-        }
-        let worker = tokio::select! {
-            biased;
-            permit = self.workers.clone().acquire_owned() => match permit {
-                Ok(p) => p,
-                Err(_) => return Done::Failed(Error::Internal("the worker pool is closed".into())),
-            },
-            by = &mut superseded => return Done::Skipped { superseded_by: by },
-            () = &mut expired => return Done::Failed(Error::DeadlineExceeded),
+        let after = fusion.as_mut().and_then(|f| f.after.take());
+        let worker = match self.take_worker(after, superseded, expired.as_mut()).await {
+            Ok(worker) => worker,
+            Err(done) => return done,
         };
         if deadline.is_some_and(|d| Instant::now() >= d) {
             return Done::Failed(Error::DeadlineExceeded);
@@ -281,24 +286,7 @@ impl Dispatcher {
         // caller goes away while the job runs.
         let job = tokio::task::spawn_blocking(move || {
             let _permits = (admission, worker);
-            let Some(turn) = fusion else {
-                return run_pipeline(&frame, &options, &pipeline);
-            };
-            let FusionTurn {
-                stream,
-                done,
-                reset,
-                ..
-            } = turn;
-            let mut map = stream.map.lock().unwrap_or_else(|e| e.into_inner());
-            let out = run_fused(&frame, &options, &pipeline, &mut map, reset);
-            let bytes = map_bytes(&map);
-            drop(map);
-            let before = stream.bytes.swap(bytes, Ordering::Relaxed);
-            stream.metrics.fusion_bytes(bytes as f64 - before as f64);
-            // The next frame of the stream may fuse.
-            drop(done);
-            out
+            compute_frame(&frame, &options, &pipeline, fusion)
         });
         // A frame that outlives the caller's deadline is answered DEADLINE_EXCEEDED at once; its
         // computation cannot be interrupted and finishes in the background, keeping its permits.
@@ -322,6 +310,60 @@ impl Dispatcher {
             Err(join) => Done::Failed(Error::Internal(format!("pipeline worker failed: {join}"))),
         }
     }
+
+    /// Waits for the frame's fusion turn (`after`, the previous frame's fusion), then for a
+    /// worker; or says how the frame ended while it waited (skipped, expired).
+    ///
+    /// A fused frame waits for its turn before it takes a worker, so that a stream never holds a
+    /// worker while it waits for itself. A frame skipped or expired while it waits is not fused:
+    /// fusing it needs its segmentation, the very work skipping saves, and its points without
+    /// classes would add geometry no class vouches for.
+    async fn take_worker(
+        &self,
+        after: Option<tokio::sync::oneshot::Receiver<()>>,
+        mut superseded: Pin<&mut impl Future<Output = u64>>,
+        mut expired: Pin<&mut impl Future<Output = ()>>,
+    ) -> Result<OwnedSemaphorePermit, Done> {
+        if let Some(after) = after {
+            tokio::select! {
+                biased;
+                _ = after => {}
+                by = &mut superseded => return Err(Done::Skipped { superseded_by: by }),
+                () = &mut expired => return Err(Done::Failed(Error::DeadlineExceeded)),
+            }
+        }
+        tokio::select! {
+            biased;
+            permit = self.workers.clone().acquire_owned() => permit.map_err(|_| {
+                Done::Failed(Error::Internal("the worker pool is closed".into()))
+            }),
+            by = &mut superseded => Err(Done::Skipped { superseded_by: by }),
+            () = &mut expired => Err(Done::Failed(Error::DeadlineExceeded)),
+        }
+    }
+}
+
+/// One frame's computation on a worker: judged alone, or from its stream's map, after which
+/// the stream's next frame may fuse.
+fn compute_frame(
+    frame: &Frame,
+    options: &FrameOptions,
+    pipeline: &Pipeline,
+    fusion: Option<FusionTurn>,
+) -> Result<FrameOutput, Error> {
+    let Some(FusionTurn {
+        stream,
+        done,
+        reset,
+        ..
+    }) = fusion
+    else {
+        return run_pipeline(frame, options, pipeline);
+    };
+    let out = stream.fuse(frame, options, pipeline, reset);
+    // The next frame of the stream may fuse.
+    drop(done);
+    out
 }
 
 /// A frame's place in the queue: one of `pipeline.queue_capacity` and its share of
