@@ -35,7 +35,7 @@ fn scan(seed: u64) -> (Vec<[f64; 3]>, Vec<u8>) {
 }
 
 /// A far camera at the sensor, 0.02 rad a pixel, seeing the whole roof but never finely enough
-/// ([`FusionParams::max_footprint_m`]): every insertion then looks at every cell, the most work
+/// ([`FusionParams::max_pixel_footprint_m`]): every insertion then looks at every cell, the most work
 /// the resolution rule can cost.
 fn far_view(p: &[f64; 3]) -> Option<f64> {
     let d = [p[0] - SENSOR[0], p[1] - SENSOR[1], p[2] - SENSOR[2]];

@@ -4,7 +4,7 @@
 //! frame's polygons end at its own outermost points and one frame's segmentation miss can become
 //! an unsafe site. A [`FusionMap`] keeps, per stream and in world coordinates:
 //!
-//! - the scans' points, thinned to one mean point per cubic cell of [`FusionParams::cell_m`]
+//! - the scans' points, thinned to one mean point per cubic cell of [`FusionParams::cell_size_m`]
 //!   (answers take the top cell of each column: the surface seen from above);
 //! - per cell, the classes the frames that saw it gave it: one vote per frame (the majority
 //!   class of that frame's points in the cell), so a dense frame does not outvote a sparse one.
@@ -12,7 +12,7 @@
 //!   evidence is not washed out by one contrary frame, and a view whose pixels there are much
 //!   finer than every earlier voter's replaces their votes (a far pixel smears an edge's class
 //!   over the roof beside it); and whether a camera has seen the cell
-//!   finely enough to show small obstacles ([`FusionParams::max_footprint_m`]: from 40 m a
+//!   finely enough to show small obstacles ([`FusionParams::max_pixel_footprint_m`]: from 40 m a
 //!   small air vent is a pixel or two, and a frame's miss there would be every frame's), which
 //!   answers report ([`Fused::unresolved`]) so that landing circles keep clear of the rest;
 //! - the keep-out footprints of recent frames' obstacle pixels (`K`, opaque here: the server
@@ -78,7 +78,7 @@ pub const CLASSES: usize = 16;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FusionParams {
     /// Side of the cubic cells points are thinned to, metres.
-    pub cell_m: f64,
+    pub cell_size_m: f64,
     /// Cells not seen for this long, and keep-out footprints older than this, are forgotten,
     /// seconds.
     pub horizon_s: f64,
@@ -96,18 +96,18 @@ pub struct FusionParams {
     /// One obstacle vote outweighs this many landable votes.
     pub obstacle_weight: u32,
     /// Whether [`FusionMap::register`] corrects scans (point-to-plane alignment to the map).
-    pub register: bool,
+    pub register_scans: bool,
     /// A cell is resolved once a camera saw it finely enough to show small obstacles: a view
     /// ([`Scan::view`]) one of whose class pixels covered at most this much of the level ground
     /// there (the longer side, metres). Answers flag the landable cells not yet resolved
     /// ([`Fused::unresolved`]). 0 turns the rule off: every cell counts as resolved.
-    pub max_footprint_m: f64,
+    pub max_pixel_footprint_m: f64,
 }
 
 impl Default for FusionParams {
     fn default() -> Self {
         Self {
-            cell_m: 0.15,
+            cell_size_m: 0.15,
             horizon_s: 30.0,
             max_cells: 250_000,
             // Four frames a second apart cover a 4 s approach; where a much nearer frame sees a
@@ -118,11 +118,11 @@ impl Default for FusionParams {
             keep_out_interval_s: 1.0,
             max_jump_m: 15.0,
             obstacle_weight: 4,
-            register: true,
+            register_scans: true,
             // The smallest air vents are 0.4-0.6 m across; the shipped model missed a 0.55 m
             // one at 0.2-0.25 m a pixel. At 0.2 m a 0.4 m vent spans two pixels (EVALUATION.md,
             // "Resolved cells": 0.25 and 0.3 left unsafe sites).
-            max_footprint_m: 0.2,
+            max_pixel_footprint_m: 0.2,
         }
     }
 }
@@ -133,8 +133,8 @@ impl FusionParams {
         let checks = [
             (
                 "cell_size_m",
-                (0.02..=5.0).contains(&self.cell_m),
-                self.cell_m.to_string(),
+                (0.02..=5.0).contains(&self.cell_size_m),
+                self.cell_size_m.to_string(),
                 "must be in [0.02, 5]",
             ),
             (
@@ -175,8 +175,8 @@ impl FusionParams {
             ),
             (
                 "max_pixel_footprint_m",
-                (0.0..=100.0).contains(&self.max_footprint_m),
-                self.max_footprint_m.to_string(),
+                (0.0..=100.0).contains(&self.max_pixel_footprint_m),
+                self.max_pixel_footprint_m.to_string(),
                 "must be in [0, 100]",
             ),
         ];
@@ -227,7 +227,7 @@ pub struct Scan<'a, K> {
     /// One class id per point, when the frame was classified.
     pub classes: Option<&'a [u8]>,
     /// The camera the classes came from, when they came from one: how finely it saw each cell
-    /// ([`FusionParams::max_footprint_m`]). Classes from elsewhere count as seen finely.
+    /// ([`FusionParams::max_pixel_footprint_m`]). Classes from elsewhere count as seen finely.
     pub view: Option<View<'a>>,
     /// The frame's keep-out footprints, when it has any.
     pub keep_out: Option<K>,
@@ -300,7 +300,7 @@ pub struct Fused {
     /// The cell's class when any frame classified it (0 where none did).
     pub classes: Option<Vec<u8>>,
     /// Per point, whether its cell's class is landable but no view fine enough to show small
-    /// obstacles has seen it ([`FusionParams::max_footprint_m`]): the cell could lie on an
+    /// obstacles has seen it ([`FusionParams::max_pixel_footprint_m`]): the cell could lie on an
     /// obstacle the camera could not resolve. All `false` with the rule off.
     pub unresolved: Vec<bool>,
 }
@@ -434,7 +434,7 @@ struct Cell {
     /// Time of the last frame that saw the cell, seconds since the map started.
     seen_s: f32,
     /// Whether a view fine enough to show small obstacles saw the cell
-    /// ([`FusionParams::max_footprint_m`]).
+    /// ([`FusionParams::max_pixel_footprint_m`]).
     resolved: bool,
     /// The finest pixel footprint of the views whose votes the cell holds, metres (infinite
     /// before the first view).
@@ -512,7 +512,7 @@ impl<K> FusionMap<K> {
         }
         self.drone_id.clear();
         self.drone_id.push_str(scan.drone_id);
-        let cell = self.params.cell_m;
+        let cell = self.params.cell_size_m;
         let origin = *self.origin.get_or_insert_with(|| anchor(scan, cell));
         if self.last.is_none() {
             self.start_s = scan.time_s;
@@ -569,7 +569,7 @@ impl<K> FusionMap<K> {
         let Some(origin) = self.origin else {
             return Surface::default();
         };
-        let c = self.params.cell_m;
+        let c = self.params.cell_size_m;
         let inside = |p: &[f64; 3]| {
             p[0] >= bounds[0][0]
                 && p[0] <= bounds[1][0]
@@ -609,7 +609,7 @@ impl<K> FusionMap<K> {
     ) -> (Option<Vec<u8>>, Vec<bool>) {
         let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
         let weight = self.params.obstacle_weight;
-        let resolving = self.params.max_footprint_m > 0.0;
+        let resolving = self.params.max_pixel_footprint_m > 0.0;
         let (classes, unresolved) = surface
             .keys
             .iter()
@@ -660,7 +660,7 @@ impl<K> FusionMap<K> {
     pub fn origin_for(&self, scan: &Scan<'_, K>) -> [f64; 3] {
         match self.origin {
             Some(origin) if self.would_reset(scan).is_none() => origin,
-            _ => anchor(scan, self.params.cell_m),
+            _ => anchor(scan, self.params.cell_size_m),
         }
     }
 
@@ -701,7 +701,7 @@ impl<K> FusionMap<K> {
         origin: [f64; 3],
         seen_s: f32,
     ) -> Vec<([i32; 3], u32)> {
-        let c = self.params.cell_m;
+        let c = self.params.cell_size_m;
         // (cell, offset in the cell in cell units, index) of every usable point.
         let mut keyed: Vec<([i32; 3], [f32; 3], u32)> = Vec::with_capacity(scan.points.len());
         for (i, p) in scan.points.iter().enumerate() {
@@ -796,11 +796,11 @@ impl<K> FusionMap<K> {
     /// checked: a cell behind something nearer the camera counts as seen, which can only
     /// matter for the cells a nearer obstacle hides, whose own class votes still decide.
     fn resolve(&mut self, view: View<'_>, origin: [f64; 3]) {
-        let max = self.params.max_footprint_m;
+        let max = self.params.max_pixel_footprint_m;
         if max <= 0.0 {
             return;
         }
-        let c = self.params.cell_m;
+        let c = self.params.cell_size_m;
         for (key, cell) in self.cells.iter_mut().filter(|(_, cell)| !cell.resolved) {
             let p = cell.position(key, origin, c);
             cell.resolved = (view.0)(&p).is_some_and(|f| f <= max);

@@ -143,7 +143,7 @@ impl<K> FusionMap<K> {
     ) -> Result<Correction, NotRegistered> {
         let Some(origin) = self
             .origin
-            .filter(|_| self.params.register && self.frames > 0)
+            .filter(|_| self.params.register_scans && self.frames > 0)
         else {
             return Err(NotRegistered::Nothing);
         };
@@ -209,7 +209,7 @@ impl<K> FusionMap<K> {
     /// The plane the map's cells around `p` (map-origin metres) form, when they form one, and
     /// `p` is near it. `planes` remembers each cell's neighbourhood plane (centroid, normal).
     fn plane_near(&self, p: &Vector3<f64>, planes: &mut Planes) -> Option<Match> {
-        let c = self.params.cell_m;
+        let c = self.params.cell_size_m;
         let key = [p.x, p.y, p.z].map(|v| (v / c).floor());
         if !key.iter().all(|k| k.abs() < 1.0e9) {
             return None;
@@ -226,7 +226,7 @@ impl<K> FusionMap<K> {
     /// The plane (centroid, unit normal) the cells around the cell `key` form, when they form
     /// one.
     fn plane_at(&self, key: [i32; 3]) -> Option<(Vector3<f64>, Vector3<f64>)> {
-        let c = self.params.cell_m;
+        let c = self.params.cell_size_m;
         let mut means = [Vector3::zeros(); 27];
         let mut n = 0;
         for dx in -1..=1 {

@@ -198,7 +198,7 @@ fn unresolved_at(map: &FusionMap<u32>, p: [f64; 3]) -> bool {
 #[test]
 fn landable_cells_are_unresolved_until_a_fine_view_saw_them() {
     let pts = roof([0.0; 3]);
-    let max = FusionParams::default().max_footprint_m;
+    let max = FusionParams::default().max_pixel_footprint_m;
     let rooftop = vec![ROOFTOP; pts.len()];
     let mut ac = rooftop.clone();
     ac[210] = AC_UNIT;
@@ -233,7 +233,7 @@ fn landable_cells_are_unresolved_until_a_fine_view_saw_them() {
     assert!(unresolved_at(&m, pts[19]), "still never in view");
     // With the rule off, or with classes that came from no camera, nothing is flagged.
     let off = FusionParams {
-        max_footprint_m: 0.0,
+        max_pixel_footprint_m: 0.0,
         ..FusionParams::default()
     };
     for (params, view) in [(off, Some(View(&far))), (FusionParams::default(), None)] {
@@ -356,7 +356,7 @@ fn keep_out_memory_spreads_frames_over_the_approach() {
 #[test]
 fn bad_parameters_name_their_field() {
     let err = FusionMap::<u32>::new(FusionParams {
-        cell_m: 0.0,
+        cell_size_m: 0.0,
         ..FusionParams::default()
     })
     .unwrap_err();
@@ -368,7 +368,7 @@ fn bad_parameters_name_their_field() {
     .unwrap_err();
     assert!(err.to_string().contains("max_jump_m"), "{err}");
     let err = FusionMap::<u32>::new(FusionParams {
-        max_footprint_m: -0.1,
+        max_pixel_footprint_m: -0.1,
         ..FusionParams::default()
     })
     .unwrap_err();
@@ -490,7 +490,7 @@ fn the_origin_lies_among_the_first_scans_points_and_holds_until_a_reset() {
     let mut m = map();
     let origin = m.origin_for(&first);
     let centre = landing_fusion::centre(&far, [0.0; 3]);
-    let cell = FusionParams::default().cell_m;
+    let cell = FusionParams::default().cell_size_m;
     assert!(
         (0..3).all(|i| (origin[i] - centre[i]).abs() <= cell / 2.0 + 1e-6),
         "{origin:?}"

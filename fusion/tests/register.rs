@@ -140,7 +140,7 @@ fn nothing_to_register_to_and_nothing_in_common() {
     ));
 
     let off = FusionParams {
-        register: false,
+        register_scans: false,
         ..FusionParams::default()
     };
     let mut map: FusionMap<()> = FusionMap::new(off).unwrap();

@@ -170,7 +170,7 @@ fn benches(c: &mut Criterion) {
             (
                 "detect_keep_out_fused",
                 CloudKind::FusedMap {
-                    cell_m: s.spacing_m,
+                    cell_size_m: s.spacing_m,
                 },
             ),
         ] {

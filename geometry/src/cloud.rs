@@ -10,7 +10,7 @@ use crate::{GeometryError, Triangulation};
 /// A single scan's points lie far apart, and the pipeline is the paper's. A fused map's cells lie
 /// a cell apart, and three mechanisms apply, each explained where it is implemented:
 /// - pinholes are closed ([`crate::regions::close_pinholes`]): range noise tilts short triangles
-///   past `dot_min` and punches holes that hold no point of their own;
+///   past `min_normal_dot` and punches holes that hold no point of their own;
 /// - polygons end halfway to the first point that is not theirs
 ///   ([`crate::boundary::BoundaryParams::midpoint_max_edge_m`]), not a cell inside the true edge
 ///   (the safe circles stay where they were);
@@ -23,11 +23,11 @@ pub enum CloudKind {
     /// between them (`EVALUATION.md`).
     #[default]
     Scan,
-    /// A fusion map's cells (`landing_fusion`): one point per occupied cell of `cell_m` metres,
+    /// A fusion map's cells (`landing_fusion`): one point per occupied cell of `cell_size_m` metres,
     /// so neighbouring points lie a cell or two apart.
     FusedMap {
         /// The map's cell size, metres (finite and > 0).
-        cell_m: f64,
+        cell_size_m: f64,
     },
 }
 
@@ -57,18 +57,20 @@ impl CloudKind {
     fn within_two_cells(&self) -> f64 {
         match self {
             Self::Scan => 0.0,
-            Self::FusedMap { cell_m } => 2.0 * cell_m,
+            Self::FusedMap { cell_size_m } => 2.0 * cell_size_m,
         }
     }
 
-    /// Checks the cell size; the error names the field `cell_m`.
+    /// Checks the cell size; the error names the field `cell_size_m`.
     pub fn validate(&self) -> Result<(), GeometryError> {
         match *self {
             Self::Scan => Ok(()),
-            Self::FusedMap { cell_m } if cell_m.is_finite() && cell_m > 0.0 => Ok(()),
-            Self::FusedMap { cell_m } => Err(GeometryError::InvalidParameter {
-                field: "cell_m",
-                value: cell_m.to_string(),
+            Self::FusedMap { cell_size_m } if cell_size_m.is_finite() && cell_size_m > 0.0 => {
+                Ok(())
+            }
+            Self::FusedMap { cell_size_m } => Err(GeometryError::InvalidParameter {
+                field: "cell_size_m",
+                value: cell_size_m.to_string(),
                 reason: "must be finite and > 0",
             }),
         }

@@ -2,7 +2,7 @@
 //!
 //! Entry point: [`filter_triangles`]. A triangle is kept when its longest 3-D edge is shorter than
 //! `l_max`, all three vertices have a landable class (or the cloud is unclassified), and either its
-//! unit normal is steep enough (`|n · k| > dot_min`) or its vertical extent is below `z_min` (the
+//! unit normal is steep enough (`|n · k| > min_normal_dot`) or its vertical extent is below `z_min` (the
 //! bypass that keeps sensor noise from punching spurious holes into a flat mesh).
 
 use crate::Params;
@@ -12,11 +12,11 @@ use crate::triangulation::Triangulation;
 #[derive(Debug, Clone, PartialEq)]
 pub struct FilterParams {
     /// `l_max`, metres: a triangle with a 3-D edge at least this long is dropped.
-    pub l_max_m: f64,
-    /// `dot_min`: a triangle needs `|n · k| > dot_min` (unless the `z_min` bypass applies).
-    pub dot_min: f64,
+    pub max_triangle_edge_m: f64,
+    /// `min_normal_dot`: a triangle needs `|n · k| > min_normal_dot` (unless the `z_min` bypass applies).
+    pub min_normal_dot: f64,
     /// `z_min`, metres: a triangle with a smaller vertical extent skips the normal test.
-    pub z_min_m: f64,
+    pub max_triangle_height_m: f64,
     /// `V`: classes allowed at all three vertices. Ignored when there are no classes.
     pub landable_classes: Vec<u8>,
 }
@@ -30,9 +30,9 @@ impl Default for FilterParams {
 impl From<&Params> for FilterParams {
     fn from(p: &Params) -> Self {
         Self {
-            l_max_m: p.l_max_m,
-            dot_min: p.dot_min,
-            z_min_m: p.z_min_m,
+            max_triangle_edge_m: p.max_triangle_edge_m,
+            min_normal_dot: p.min_normal_dot,
+            max_triangle_height_m: p.max_triangle_height_m,
             landable_classes: p.landable_classes.clone(),
         }
     }
@@ -52,10 +52,10 @@ pub fn filter_triangles(
     for &c in &params.landable_classes {
         landable[usize::from(c)] = true;
     }
-    let l_max2 = params.l_max_m * params.l_max_m;
-    // |n·k| > dot_min with n = c / |c| is c_z^2 > dot_min^2 |c|^2 (dot_min >= 0): no square root.
-    let dot_min2 = params.dot_min.max(0.0).powi(2);
-    let z_min = params.z_min_m;
+    let l_max2 = params.max_triangle_edge_m * params.max_triangle_edge_m;
+    // |n·k| > min_normal_dot with n = c / |c| is c_z^2 > min_normal_dot^2 |c|^2 (min_normal_dot >= 0): no square root.
+    let dot_min2 = params.min_normal_dot.max(0.0).powi(2);
+    let z_min = params.max_triangle_height_m;
     // One flag per point, so a triangle costs three byte loads for the class test.
     let allowed: Option<Vec<bool>> =
         classes.map(|c| c.iter().map(|&c| landable[usize::from(c)]).collect());
@@ -140,7 +140,7 @@ mod tests {
             p,
             None,
             &FilterParams {
-                dot_min: 0.0,
+                min_normal_dot: 0.0,
                 ..FilterParams::default()
             }
         ));

@@ -78,11 +78,11 @@ pub const DEFAULT_MIN_SAFE_RADIUS_M: f64 = 1.0;
 #[derive(Debug, Clone, PartialEq)]
 pub struct Params {
     /// `l_max`: triangles with a longer (3-D) edge are dropped, metres.
-    pub l_max_m: f64,
-    /// `dot_min`: minimum `|n · k|` of a triangle's unit normal.
-    pub dot_min: f64,
+    pub max_triangle_edge_m: f64,
+    /// `min_normal_dot`: minimum `|n · k|` of a triangle's unit normal.
+    pub min_normal_dot: f64,
     /// `z_min`: triangles whose vertical extent is below this bypass the normal test, metres.
-    pub z_min_m: f64,
+    pub max_triangle_height_m: f64,
     /// `V`: point classes allowed in a landing plane. Ignored when the cloud has no classes.
     pub landable_classes: Vec<u8>,
     /// Planar regions with fewer triangles are discarded.
@@ -102,9 +102,9 @@ pub struct Params {
 impl Default for Params {
     fn default() -> Self {
         Self {
-            l_max_m: 4.0,
-            dot_min: 0.96,
-            z_min_m: 0.10,
+            max_triangle_edge_m: 4.0,
+            min_normal_dot: 0.96,
+            max_triangle_height_m: 0.10,
             landable_classes: vec![SemanticClass::BuildingRooftop as u8],
             min_region_triangles: 10,
             polylabel_precision_m: 0.5,
@@ -117,8 +117,8 @@ impl Default for Params {
 }
 
 impl Params {
-    /// Checks every parameter's range. The error names the field as in this struct (`l_max_m`);
-    /// [`Params::option_name`] gives the `landing.v1.PipelineOptions` name of the same knob.
+    /// Checks every parameter's range. The error names the field as in this struct, which is also
+    /// its `landing.v1.PipelineOptions` name (`max_triangle_edge_m`).
     pub fn validate(&self) -> Result<(), GeometryError> {
         fn bad(field: &'static str, value: impl ToString, reason: &'static str) -> GeometryError {
             GeometryError::InvalidParameter {
@@ -141,14 +141,22 @@ impl Params {
                 Err(bad(field, v, "must be finite and >= 0"))
             }
         };
-        finite_positive("l_max_m", self.l_max_m)?;
-        if self.l_max_m > MAX_ABS_COORDINATE_M {
-            return Err(bad("l_max_m", self.l_max_m, "must be <= 1e7"));
+        finite_positive("max_triangle_edge_m", self.max_triangle_edge_m)?;
+        if self.max_triangle_edge_m > MAX_ABS_COORDINATE_M {
+            return Err(bad(
+                "max_triangle_edge_m",
+                self.max_triangle_edge_m,
+                "must be <= 1e7",
+            ));
         }
-        if !(self.dot_min >= 0.0 && self.dot_min < 1.0) {
-            return Err(bad("dot_min", self.dot_min, "must be in [0, 1)"));
+        if !(self.min_normal_dot >= 0.0 && self.min_normal_dot < 1.0) {
+            return Err(bad(
+                "min_normal_dot",
+                self.min_normal_dot,
+                "must be in [0, 1)",
+            ));
         }
-        finite_non_negative("z_min_m", self.z_min_m)?;
+        finite_non_negative("max_triangle_height_m", self.max_triangle_height_m)?;
         if let Some(&c) = self
             .landable_classes
             .iter()
@@ -171,24 +179,6 @@ impl Params {
             return Err(bad("max_sites", self.max_sites, "must be >= 1"));
         }
         Ok(())
-    }
-
-    /// The `landing.v1.PipelineOptions` field that sets the parameter named `field` (as in
-    /// [`GeometryError::InvalidParameter`]), e.g. `"l_max_m"` → `"max_triangle_edge_m"`.
-    pub fn option_name(field: &str) -> Option<&'static str> {
-        Some(match field {
-            "l_max_m" => "max_triangle_edge_m",
-            "dot_min" => "min_normal_dot",
-            "z_min_m" => "max_triangle_height_m",
-            "landable_classes" => "landable_classes",
-            "min_region_triangles" => "min_region_triangles",
-            "polylabel_precision_m" => "polylabel_precision_m",
-            "min_safe_radius_m" => "min_safe_radius_m",
-            "min_area_m2" => "min_area_m2",
-            "min_hole_area_m2" => "min_hole_area_m2",
-            "max_sites" => "max_sites",
-            _ => return None,
-        })
     }
 }
 
@@ -429,7 +419,13 @@ fn planar_regions(
         },
     )?;
     if kind.closes_pinholes() {
-        regions::close_pinholes(tri, pts, &mut regions, params.l_max_m, params.z_min_m);
+        regions::close_pinholes(
+            tri,
+            pts,
+            &mut regions,
+            params.max_triangle_edge_m,
+            params.max_triangle_height_m,
+        );
     }
     Ok(regions)
 }

@@ -142,29 +142,29 @@ pub const PINHOLE_Z_FACTOR: f64 = 1.5;
 /// Closes the pinholes of `regions`: each connected set of at most [`MAX_PINHOLE_TRIANGLES`]
 /// triangles outside every region, all of whose neighbours are triangles of one region, that
 /// holds no point of its own (every vertex of its triangles is a vertex of that region), whose
-/// triangles have no edge of `l_max_m` or longer, and whose points span less than
-/// [`PINHOLE_Z_FACTOR`] × `z_min_m` vertically, joins that region.
+/// triangles have no edge of `max_triangle_edge_m` or longer, and whose points span less than
+/// [`PINHOLE_Z_FACTOR`] × `max_triangle_height_m` vertically, joins that region.
 ///
 /// Such a hole is no obstacle. An obstacle the scan hit has points inside its hole (its top, its
 /// sides, or a point whose class may not be landed on), and every point around a pinhole is a
 /// landable point of the plane. The pinhole is there because Algorithm 1 rejected the triangles
 /// between those points for their slope: in a dense cloud (a fused map's cells, 0.1-0.15 m
-/// apart) a few centimetres of range noise tilt a short triangle past `dot_min` with a vertical
+/// apart) a few centimetres of range noise tilt a short triangle past `min_normal_dot` with a vertical
 /// extent just over `z_min`, and one such pinhole in the middle of a roof caps every safe circle
-/// around it. A gap in the scan (an edge of `l_max_m` or more), a step between two planes (two
+/// around it. A gap in the scan (an edge of `max_triangle_edge_m` or more), a step between two planes (two
 /// regions around it) and anything taller are left as they are. The regions' plane statistics
 /// are not updated (the pinhole's points are already the region's).
 pub fn close_pinholes(
     tri: &Triangulation,
     points: &[[f64; 3]],
     regions: &mut Regions,
-    l_max_m: f64,
-    z_min_m: f64,
+    max_triangle_edge_m: f64,
+    max_triangle_height_m: f64,
 ) {
     let n = tri.len();
     let labels = &mut regions.labels;
-    let l_max2 = l_max_m * l_max_m;
-    let max_extent = PINHOLE_Z_FACTOR * z_min_m;
+    let l_max2 = max_triangle_edge_m * max_triangle_edge_m;
+    let max_extent = PINHOLE_Z_FACTOR * max_triangle_height_m;
     // Per triangle: whether a search has met it, so that a triangle is searched at most once.
     let mut seen = vec![false; n];
     let mut pocket: Vec<u32> = Vec::with_capacity(MAX_PINHOLE_TRIANGLES + 1);

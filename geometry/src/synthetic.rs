@@ -475,9 +475,9 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
     let unit = |b: u8| f64::from(b) / 255.0;
     let with_disks = head[6] & 2 == 2;
     let params = crate::Params {
-        l_max_m: 0.05 + unit(head[0]) * 20.0,
-        dot_min: unit(head[1]) * 0.999,
-        z_min_m: unit(head[2]) * 2.0,
+        max_triangle_edge_m: 0.05 + unit(head[0]) * 20.0,
+        min_normal_dot: unit(head[1]) * 0.999,
+        max_triangle_height_m: unit(head[2]) * 2.0,
         polylabel_precision_m: 0.01 + unit(head[3]) * 2.0,
         min_region_triangles: usize::from(head[4] % 16),
         max_sites: usize::from(head[5] % 8) + 1,
@@ -485,7 +485,7 @@ pub fn fuzz_detect_input(data: &[u8], max_points: usize) -> Option<DetectInput> 
     };
     let kind = if head[7] & 1 == 1 {
         CloudKind::FusedMap {
-            cell_m: 0.025 + f64::from(head[7] >> 2) / 63.0 * 2.475,
+            cell_size_m: 0.025 + f64::from(head[7] >> 2) / 63.0 * 2.475,
         }
     } else {
         CloudKind::Scan

@@ -122,9 +122,9 @@ impl DetectArgs {
     pub fn options(&self) -> FrameOptions {
         let d = Params::default();
         let params = Params {
-            l_max_m: self.l_max.unwrap_or(d.l_max_m),
-            dot_min: self.dot_min.unwrap_or(d.dot_min),
-            z_min_m: self.z_min.unwrap_or(d.z_min_m),
+            max_triangle_edge_m: self.l_max.unwrap_or(d.max_triangle_edge_m),
+            min_normal_dot: self.dot_min.unwrap_or(d.min_normal_dot),
+            max_triangle_height_m: self.z_min.unwrap_or(d.max_triangle_height_m),
             landable_classes: if self.landable_classes.is_empty() {
                 d.landable_classes.clone()
             } else {

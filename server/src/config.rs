@@ -62,15 +62,15 @@ impl Default for FusionConfig {
 impl From<&landing_fusion::FusionParams> for FusionConfig {
     fn from(p: &landing_fusion::FusionParams) -> Self {
         Self {
-            cell_size_m: p.cell_m,
+            cell_size_m: p.cell_size_m,
             horizon_s: p.horizon_s,
             max_cells: u32::try_from(p.max_cells).unwrap_or(u32::MAX),
             keep_out_frames: u32::try_from(p.keep_out_frames).unwrap_or(u32::MAX),
             keep_out_interval_s: p.keep_out_interval_s,
             max_jump_m: p.max_jump_m,
             obstacle_weight: p.obstacle_weight,
-            register_scans: p.register,
-            max_pixel_footprint_m: p.max_footprint_m,
+            register_scans: p.register_scans,
+            max_pixel_footprint_m: p.max_pixel_footprint_m,
         }
     }
 }
@@ -79,15 +79,15 @@ impl FusionConfig {
     /// The map parameters these defaults describe.
     pub fn params(&self) -> landing_fusion::FusionParams {
         landing_fusion::FusionParams {
-            cell_m: self.cell_size_m,
+            cell_size_m: self.cell_size_m,
             horizon_s: self.horizon_s,
             max_cells: self.max_cells as usize,
             keep_out_frames: self.keep_out_frames as usize,
             keep_out_interval_s: self.keep_out_interval_s,
             max_jump_m: self.max_jump_m,
             obstacle_weight: self.obstacle_weight,
-            register: self.register_scans,
-            max_footprint_m: self.max_pixel_footprint_m,
+            register_scans: self.register_scans,
+            max_pixel_footprint_m: self.max_pixel_footprint_m,
         }
     }
 

@@ -709,21 +709,21 @@ fn set_real_options(c: &mut Checker, o: &v1::PipelineOptions, p: &mut Params) {
             o.max_triangle_edge_m,
             |v| v > 0.0 && v <= 1000.0,
             "(0, 1000]",
-            &mut p.l_max_m,
+            &mut p.max_triangle_edge_m,
         ),
         (
             "min_normal_dot",
             o.min_normal_dot,
             |v| (0.0..1.0).contains(&v),
             "[0, 1)",
-            &mut p.dot_min,
+            &mut p.min_normal_dot,
         ),
         (
             "max_triangle_height_m",
             o.max_triangle_height_m,
             |v| (0.0..=100.0).contains(&v),
             "[0, 100]",
-            &mut p.z_min_m,
+            &mut p.max_triangle_height_m,
         ),
         (
             "polylabel_precision_m",
@@ -881,9 +881,9 @@ pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
 /// The defaults as the `PipelineOptions` message that `GetServiceInfo` reports.
 pub fn default_options(p: &Params) -> v1::PipelineOptions {
     v1::PipelineOptions {
-        max_triangle_edge_m: Some(p.l_max_m),
-        min_normal_dot: Some(p.dot_min),
-        max_triangle_height_m: Some(p.z_min_m),
+        max_triangle_edge_m: Some(p.max_triangle_edge_m),
+        min_normal_dot: Some(p.min_normal_dot),
+        max_triangle_height_m: Some(p.max_triangle_height_m),
         landable_classes: p.landable_classes.iter().map(|&c| i32::from(c)).collect(),
         polylabel_precision_m: Some(p.polylabel_precision_m),
         min_region_triangles: Some(u32::try_from(p.min_region_triangles).unwrap_or(u32::MAX)),
@@ -1328,7 +1328,7 @@ mod tests {
             ..Default::default()
         };
         let got = options_from(Some(&o), &Params::default()).unwrap();
-        assert_eq!(got.params.l_max_m, 2.0);
+        assert_eq!(got.params.max_triangle_edge_m, 2.0);
         assert_eq!(got.params.landable_classes, vec![4, 2]);
         assert_eq!(got.params.max_sites, Params::default().max_sites);
         assert_eq!(got.segmentation_mode, SegmentationMode::None);

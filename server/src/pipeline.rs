@@ -620,7 +620,7 @@ mod tests {
     fn a_fused_answer_closes_the_pinholes_a_frame_judged_alone_keeps() {
         // A 12 m roof of points 0.3 m apart (one a map cell), 20 m below the LiDAR, and 25 pairs
         // of neighbours 0.12 m apart in height: the two triangles on each pair's edge tilt past
-        // dot_min, a hole with no point of its own.
+        // min_normal_dot, a hole with no point of its own.
         let mut points = Vec::new();
         for y in 0..40 {
             for x in 0..40 {
@@ -641,7 +641,7 @@ mod tests {
         assert_eq!(holes(&run_pipeline(&f, &options, &pipeline).unwrap()), 25);
         // No camera resolves the cells here: the resolution rule off.
         let params = landing_fusion::FusionParams {
-            max_footprint_m: 0.0,
+            max_pixel_footprint_m: 0.0,
             ..crate::Config::default().fusion.params()
         };
         let mut map = StreamMap::new(params).unwrap();
@@ -747,7 +747,7 @@ mod tests {
         let pipeline = Pipeline::default();
         let fused = |f: &Frame| {
             let params = landing_fusion::FusionParams {
-                max_footprint_m: 0.0,
+                max_pixel_footprint_m: 0.0,
                 ..crate::Config::default().fusion.params()
             };
             let mut map = StreamMap::new(params).unwrap();
@@ -809,7 +809,7 @@ mod tests {
         };
         let alone = run_pipeline(&f, &options, &pipeline).unwrap();
         let params = landing_fusion::FusionParams {
-            max_footprint_m: 0.0,
+            max_pixel_footprint_m: 0.0,
             ..crate::Config::default().fusion.params()
         };
         let mut map = StreamMap::new(params).unwrap();

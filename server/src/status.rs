@@ -64,8 +64,7 @@ fn violations(error: &Error) -> Vec<(String, String)> {
             value,
             reason,
         }) => {
-            let option = landing_geometry::Params::option_name(field).unwrap_or(field);
-            vec![(format!("options.{option}"), format!("{value}: {reason}"))]
+            vec![(format!("options.{field}"), format!("{value}: {reason}"))]
         }
         Error::Geometry(landing_geometry::GeometryError::InvalidPoint { index, value }) => {
             vec![(

@@ -278,7 +278,7 @@ impl FusedFrame<'_> {
             points: &local,
             classes: classes.as_deref(),
             kind: CloudKind::FusedMap {
-                cell_m: map.params().cell_m,
+                cell_size_m: map.params().cell_size_m,
             },
             keep_out: &keep_out,
             unresolved: &unresolved,
