@@ -35,6 +35,7 @@
 //!
 //! let mut config = Config::default();
 //! config.segmentation.enabled = false; // no model file needed
+//! config.catalog.enabled = false; // no catalog file written
 //! config.server.metrics_listen = "127.0.0.1:0".into();
 //! let runtime = tokio::runtime::Runtime::new().unwrap();
 //! runtime.block_on(async {
@@ -71,6 +72,7 @@
 #![forbid(unsafe_code)]
 
 mod auth;
+mod catalog;
 pub mod cli;
 pub mod config;
 pub mod convert;
