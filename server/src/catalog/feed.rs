@@ -48,7 +48,7 @@ pub(crate) struct Feed {
     /// Consecutive catalogued answers since the stream (or its map) started.
     answers: u32,
     /// The previous answer's sites on resolved ground, with their streaks.
-    tracked: Vec<(Site, u32)>,
+    tracked: Vec<(Site, Streak)>,
     /// The latest answer, not yet sent.
     latest: Option<Latest>,
     last_sent: Instant,
@@ -59,8 +59,18 @@ struct Latest {
     at: Timestamp,
     drone_id: String,
     evidence: Evidence,
-    /// The answer's sites with their streaks (0: not on resolved ground).
-    sites: Vec<(Site, u32)>,
+    /// The answer's sites with their streaks (a run of 0: not on resolved ground).
+    sites: Vec<(Site, Streak)>,
+}
+
+/// How a site of the stream has been found.
+#[derive(Debug, Clone, Copy, Default)]
+struct Streak {
+    /// Consecutive answers that found it on resolved ground, this one included.
+    run: u32,
+    /// Those of them not yet counted in an observation the catalog was sent: a site's `frames`
+    /// in the catalog adds each answer once.
+    unreported: u32,
 }
 
 impl Feed {
@@ -113,26 +123,30 @@ impl Feed {
             self.tracked.clear();
         }
         self.answers = self.answers.saturating_add(1);
-        let sites: Vec<(Site, u32)> = out
+        let sites: Vec<(Site, Streak)> = out
             .sites
             .iter()
             .zip(&evidence.resolved)
             .map(|(site, &resolved)| {
+                let before = self
+                    .tracked
+                    .iter()
+                    .filter(|(t, _)| resolved && same_roof(t, site))
+                    .map(|(_, streak)| *streak)
+                    .max_by_key(|streak| streak.run)
+                    .unwrap_or_default();
                 let streak = if resolved {
-                    1 + self
-                        .tracked
-                        .iter()
-                        .filter(|(t, _)| same_roof(t, site))
-                        .map(|(_, n)| *n)
-                        .max()
-                        .unwrap_or(0)
+                    Streak {
+                        run: before.run + 1,
+                        unreported: before.unreported + 1,
+                    }
                 } else {
-                    0
+                    Streak::default()
                 };
                 (site.clone(), streak)
             })
             .collect();
-        self.tracked = sites.iter().filter(|(_, n)| *n > 0).cloned().collect();
+        self.tracked = sites.iter().filter(|(_, s)| s.run > 0).cloned().collect();
         self.latest = Some(Latest {
             at: Timestamp::now(),
             drone_id: out.drone_id.clone(),
@@ -160,6 +174,12 @@ impl Feed {
             &self.approach_id,
             &self.catalog.shared.model_id,
         );
+        // What was admitted is reported: the next observation counts only newer answers.
+        for (_, streak) in &mut self.tracked {
+            if streak.run >= min_frames {
+                streak.unreported = 0;
+            }
+        }
         match observation.validate("observation") {
             Ok(()) => self.catalog.submit(observation),
             Err(e) => {
@@ -186,14 +206,15 @@ fn same_roof(a: &Site, b: &Site) -> bool {
         && (a.plane_height_m - b.plane_height_m).abs() <= SAME_ROOF_HEIGHT_M
 }
 
-/// The observation of `latest`: its admitted sites (streak of at least `min_frames`, valid in
-/// WGS-84) and its seen area less the squares wholly inside the circles of sites not admitted yet.
+/// The observation of `latest`: its sites found by at least `min_frames` consecutive answers
+/// (valid in WGS-84) and its seen area less the squares wholly inside the circles of sites not
+/// admitted yet.
 fn observation(latest: &Latest, min_frames: u32, approach_id: &str, model_id: &str) -> Observation {
     let origin = latest.evidence.origin;
     let pending: Vec<&Site> = latest
         .sites
         .iter()
-        .filter(|(_, n)| *n > 0 && *n < min_frames)
+        .filter(|(_, s)| s.run > 0 && s.run < min_frames)
         .map(|(s, _)| s)
         .collect();
     let squares = latest
@@ -220,8 +241,8 @@ fn observation(latest: &Latest, min_frames: u32, approach_id: &str, model_id: &s
     let sites = latest
         .sites
         .iter()
-        .filter(|(_, n)| *n >= min_frames)
-        .map(|(s, n)| observed(origin, s, *n))
+        .filter(|(_, s)| s.run >= min_frames)
+        .map(|(site, s)| observed(origin, site, s.unreported.max(1)))
         .filter(|s| {
             let alone = Observation {
                 sites: vec![s.clone()],

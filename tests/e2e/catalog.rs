@@ -1,0 +1,337 @@
+//! The fleet's catalog over real gRPC with a real SQLite file: a fused approach with a geodetic
+//! origin fills it and `SearchLandingSites` finds its sites with their ages and distances; a frame
+//! without an origin is answered and counted, not catalogued; malformed searches get
+//! INVALID_ARGUMENT naming the field; a catalog whose database is down leaves frames answered and
+//! searches UNAVAILABLE naming the catalog.
+
+use std::time::{Duration, Instant, SystemTime};
+
+use landing_client::v1::landing_service_client::LandingServiceClient;
+use landing_client::v1::{self, SegmentationMode};
+use landing_client::{FrameOutcome, StreamConfig, StreamItem};
+use landing_server::Config;
+use landing_server::telemetry::scrape;
+use tonic::transport::Channel;
+use tonic_types::StatusExt as _;
+
+use crate::support::{TestServer, mode, scene, scratch, server_config, stream_with};
+
+/// Where the test frames' world origin lies: midtown Manhattan, 10 m above the ellipsoid.
+const ORIGIN: v1::GeodeticPoint = v1::GeodeticPoint {
+    latitude_deg: 40.7484,
+    longitude_deg: -73.9857,
+    altitude_m: 10.0,
+};
+
+/// A server whose catalog is the SQLite file `name` in the scratch directory, writing at once.
+fn catalog_config(name: &str) -> Config {
+    let mut c = server_config();
+    c.server.metrics_listen = "127.0.0.1:0".into();
+    c.catalog.enabled = true;
+    c.catalog.path = scratch().join(name);
+    let _ = std::fs::remove_file(&c.catalog.path);
+    c.catalog.flush_interval_s = 0.05;
+    c.catalog.observe_interval_s = 0.0;
+    c
+}
+
+/// A fused approach over `seed`'s frames, each with `origin`.
+async fn approach(
+    server: &TestServer,
+    seed: u64,
+    origin: Option<v1::GeodeticPoint>,
+) -> Vec<StreamItem> {
+    let frames: Vec<v1::Frame> = scene(seed)
+        .frames
+        .iter()
+        .map(|f| v1::Frame {
+            geodetic_origin: origin,
+            ..f.frame.clone()
+        })
+        .collect();
+    let config = StreamConfig {
+        options: Some(mode(SegmentationMode::PointClasses)),
+        max_in_flight: 4,
+        fusion: Some(v1::FusionOptions {
+            enabled: true,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    let items = stream_with(server, frames, config, None).await;
+    for item in &items {
+        assert!(
+            matches!(item.outcome, FrameOutcome::Result(_)),
+            "every frame is answered: {:?}",
+            item.outcome
+        );
+    }
+    items
+}
+
+async fn raw_client(server: &TestServer) -> LandingServiceClient<Channel> {
+    let channel = Channel::from_shared(server.url.clone())
+        .unwrap()
+        .connect()
+        .await
+        .expect("connect");
+    LandingServiceClient::new(channel)
+}
+
+fn search_near(center: v1::GeodeticPoint, radius_m: f64) -> v1::SearchLandingSitesRequest {
+    v1::SearchLandingSitesRequest {
+        center: Some(center),
+        radius_m,
+        ..Default::default()
+    }
+}
+
+/// Searches until the catalog returns something (the writer runs beside the stream), for at
+/// most ten seconds.
+async fn search_until_found(
+    client: &mut LandingServiceClient<Channel>,
+    request: v1::SearchLandingSitesRequest,
+) -> v1::SearchLandingSitesResponse {
+    let give_up = Instant::now() + Duration::from_secs(10);
+    loop {
+        let page = client
+            .search_landing_sites(request.clone())
+            .await
+            .expect("search")
+            .into_inner();
+        if !page.sites.is_empty() || Instant::now() > give_up {
+            return page;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The value of the series written exactly as `series`, if present.
+fn value(text: &str, series: &str) -> Option<f64> {
+    text.lines()
+        .find_map(|l| l.strip_prefix(series)?.strip_prefix(' '))
+        .map(|v| v.trim().parse().expect("a number"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fused_approach_with_an_origin_fills_the_catalog_and_a_search_finds_it() {
+    let server = TestServer::with_config(catalog_config("fill.sqlite")).await;
+    let mut client = raw_client(&server).await;
+    let before = SystemTime::now();
+
+    // Without an origin: answered as always, counted, not catalogued.
+    let plain = approach(&server, 41, None).await;
+    let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
+    let no_origin = "landing_catalog_frames_total{outcome=\"no_geodetic_origin\"}";
+    assert_eq!(value(&metrics, no_origin), Some(plain.len() as f64));
+
+    let items = approach(&server, 41, Some(ORIGIN)).await;
+    let last = items.last().and_then(|i| i.outcome.result()).unwrap();
+    assert!(!last.sites.is_empty(), "the approach finds sites");
+    let page = search_until_found(&mut client, search_near(ORIGIN, 500.0)).await;
+    assert!(
+        !page.sites.is_empty(),
+        "the catalog knows the approach's sites"
+    );
+    let now = SystemTime::now();
+    let mut previous = 0.0;
+    for site in &page.sites {
+        assert_eq!(site.kind, v1::SiteKind::Site as i32);
+        // Every catalog site is one of the approach's answers', at the same place (the last
+        // answer's, unless that answer did not resolve its ground).
+        let center = site.center.unwrap();
+        let answered = items
+            .iter()
+            .filter_map(|i| i.outcome.result())
+            .flat_map(|r| &r.sites)
+            .filter_map(|s| s.center_geodetic)
+            .any(|g| {
+                (g.latitude_deg - center.latitude_deg).abs() < 1e-9
+                    && (g.longitude_deg - center.longitude_deg).abs() < 1e-9
+            });
+        assert!(answered, "{site:?}");
+        assert!(
+            site.frames >= 3,
+            "confirmed by min_frames answers: {site:?}"
+        );
+        assert_eq!(site.approaches, 1);
+        assert_eq!(site.drone_id, "e2e-41");
+        let confirmed = SystemTime::try_from(site.last_confirmed.unwrap()).unwrap();
+        assert!(
+            before <= confirmed && confirmed <= now,
+            "the server's clock"
+        );
+        assert!(site.polygon.first().is_some_and(|r| r.points.len() >= 3));
+        // Nearest first, with the distance from the search's centre.
+        assert!(site.distance_m >= previous && site.distance_m <= 500.0);
+        previous = site.distance_m;
+    }
+    let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
+    let sites = value(&metrics, "landing_catalog_sites{kind=\"site\"}").unwrap();
+    assert_eq!(sites, page.sites.len() as f64, "{metrics}");
+    assert_eq!(value(&metrics, "landing_catalog_connected"), Some(1.0));
+    assert!(value(&metrics, "landing_catalog_writes_total").unwrap() >= 1.0);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn malformed_searches_name_their_field() {
+    let server = TestServer::with_config(catalog_config("malformed.sqlite")).await;
+    let mut client = raw_client(&server).await;
+    // The store checks the fields: wait until the writer thread has opened it.
+    let give_up = Instant::now() + Duration::from_secs(10);
+    while let Err(status) = client
+        .search_landing_sites(search_near(ORIGIN, 500.0))
+        .await
+    {
+        assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+        assert!(Instant::now() < give_up, "the catalog never opened");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let at = |latitude_deg: f64| v1::GeodeticPoint {
+        latitude_deg,
+        ..ORIGIN
+    };
+    let cases: Vec<(v1::SearchLandingSitesRequest, &str)> = vec![
+        (search_near(at(91.0), 500.0), "center.latitude_deg"),
+        (search_near(ORIGIN, -1.0), "radius_m"),
+        (
+            v1::SearchLandingSitesRequest {
+                page_size: -1,
+                ..search_near(ORIGIN, 500.0)
+            },
+            "page_size",
+        ),
+        (
+            v1::SearchLandingSitesRequest {
+                page_token: "bm90IGEgdG9rZW4".into(),
+                ..search_near(ORIGIN, 500.0)
+            },
+            "page_token",
+        ),
+        (
+            v1::SearchLandingSitesRequest {
+                center: None,
+                ..search_near(ORIGIN, 500.0)
+            },
+            "center",
+        ),
+        (
+            v1::SearchLandingSitesRequest {
+                max_age: Some(prost_types::Duration {
+                    seconds: -1,
+                    nanos: 0,
+                }),
+                ..search_near(ORIGIN, 500.0)
+            },
+            "max_age",
+        ),
+    ];
+    for (request, field) in cases {
+        let status = client.search_landing_sites(request).await.unwrap_err();
+        assert_eq!(
+            status.code(),
+            tonic::Code::InvalidArgument,
+            "{field}: {status:?}"
+        );
+        let details = status.get_error_details();
+        let fields: Vec<&str> = details
+            .bad_request()
+            .map(|b| {
+                b.field_violations
+                    .iter()
+                    .map(|v| v.field.as_str())
+                    .collect()
+            })
+            .unwrap_or_default();
+        assert_eq!(fields, vec![field], "{status:?}");
+    }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tampered_page_token_is_refused() {
+    let server = TestServer::with_config(catalog_config("tokens.sqlite")).await;
+    approach(&server, 41, Some(ORIGIN)).await;
+    let mut client = raw_client(&server).await;
+    let first = v1::SearchLandingSitesRequest {
+        page_size: 1,
+        ..search_near(ORIGIN, 500.0)
+    };
+    let page = search_until_found(&mut client, first.clone()).await;
+    assert_eq!(page.sites.len(), 1);
+    if page.next_page_token.is_empty() {
+        // One site only: there is no token to tamper with (the malformed case covers a forged one).
+        server.stop().await;
+        return;
+    }
+    let mut token: Vec<char> = page.next_page_token.chars().collect();
+    token[5] = if token[5] == 'A' { 'B' } else { 'A' };
+    let tampered = v1::SearchLandingSitesRequest {
+        page_token: token.into_iter().collect(),
+        ..first.clone()
+    };
+    let status = client.search_landing_sites(tampered).await.unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument);
+    let details = status.get_error_details();
+    assert_eq!(
+        details.bad_request().unwrap().field_violations[0].field,
+        "page_token"
+    );
+    // The genuine token gives the next page, with another site.
+    let next = v1::SearchLandingSitesRequest {
+        page_token: page.next_page_token.clone(),
+        ..first
+    };
+    let second = client
+        .search_landing_sites(next)
+        .await
+        .unwrap()
+        .into_inner();
+    assert_eq!(second.sites.len(), 1);
+    assert_ne!(second.sites[0].id, page.sites[0].id);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_the_database_down_frames_are_answered_and_searches_are_unavailable() {
+    // A port nothing listens on.
+    let port = {
+        let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        l.local_addr().unwrap().port()
+    };
+    let mut config = catalog_config("unused.sqlite");
+    config.catalog.url = format!("postgres://landing@127.0.0.1:{port}/catalog?connect_timeout=2");
+    config.catalog.retry_interval_s = 0.2;
+    let server = TestServer::with_config(config).await;
+    let items = approach(&server, 41, Some(ORIGIN)).await;
+    assert!(items.iter().all(|i| i.outcome.result().is_some()));
+    let mut client = raw_client(&server).await;
+    let status = client
+        .search_landing_sites(search_near(ORIGIN, 500.0))
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+    assert!(status.message().contains("catalog"), "{}", status.message());
+    let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
+    assert_eq!(value(&metrics, "landing_catalog_connected"), Some(0.0));
+    assert!(value(&metrics, "landing_catalog_write_failures_total").unwrap() >= 1.0);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_server_without_a_catalog_says_so() {
+    let server = TestServer::start().await;
+    let mut client = raw_client(&server).await;
+    let status = client
+        .search_landing_sites(search_near(ORIGIN, 500.0))
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), tonic::Code::Unavailable);
+    assert!(
+        status.message().contains("catalog.enabled"),
+        "{}",
+        status.message()
+    );
+    server.stop().await;
+}
