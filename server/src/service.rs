@@ -211,12 +211,10 @@ impl v1::landing_service_server::LandingService for LandingService {
                 latest_tx.send_replace((index, sequence));
                 // The first message decides whether the stream fuses, and with what map.
                 let fusing = fusing.get_or_insert_with(|| match &request.fusion {
-                    Some(asked) if asked.enabled => {
-                        match convert::fusion_map(asked, &fusion_defaults) {
-                            Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
-                            Err(e) => Fusing::Refused(e),
-                        }
-                    }
+                    Some(asked) => match convert::fusion_map(asked, &fusion_defaults) {
+                        Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
+                        Err(e) => Fusing::Refused(e),
+                    },
                     _ => Fusing::Off,
                 });
                 let (parts, turn) = match fusing {

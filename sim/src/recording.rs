@@ -290,7 +290,7 @@ pub fn frame_messages(
             pose: Some(lidar_pose),
             point_stride: POINT_STRIDE,
             fields: fields(),
-            data: pack_points(&f.points),
+            data: pack_points(&f.points).into(),
         }),
         image: Some(v1::CameraImage {
             timestamp: Some(ts),
@@ -298,7 +298,7 @@ pub fn frame_messages(
             pose: Some(cam_pose),
             calibration: Some(calibration(&f.intrinsics)),
             image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-                data: encode_rgb_png(&f.image)?,
+                data: encode_rgb_png(&f.image)?.into(),
                 format: "png".to_string(),
             })),
         }),
@@ -312,7 +312,7 @@ pub fn frame_messages(
         pose: Some(cam_pose),
         calibration: Some(calibration(&f.intrinsics)),
         image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-            data: encode_label_png(&f.image)?,
+            data: encode_label_png(&f.image)?.into(),
             format: "png".to_string(),
         })),
     };
