@@ -43,11 +43,12 @@ const AFTER_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage, 3 server unreachab
 #[derive(Debug, Parser)]
 #[command(name = "landing", version, about, after_help = AFTER_HELP)]
 pub struct Cli {
-    #[command(flatten)]
-    pub connection: ConnectionArgs,
     /// Print machine-readable JSON instead of tables.
     #[arg(long, global = true)]
     pub json: bool,
+    // Last among the flags: its `next_help_heading` ("Connection") holds for what follows.
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -874,6 +875,52 @@ fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn help_lists_the_connection_flags_under_their_own_heading() {
+        use clap::CommandFactory;
+        let help = Cli::command().render_long_help().to_string();
+        let (options, connection) = help.split_once("\nConnection:\n").expect("a heading");
+        assert!(options.contains("--json"), "{help}");
+        for flag in [
+            "--server",
+            "--token",
+            "--ca-cert",
+            "--tls-domain",
+            "--timeout",
+        ] {
+            assert!(
+                connection.contains(flag),
+                "{flag} not under Connection: {help}"
+            );
+            assert!(!options.contains(flag), "{flag} outside Connection: {help}");
+        }
+    }
+
+    #[test]
+    fn segmentation_names_are_the_api_modes() {
+        let parse = |name: &str| {
+            Cli::try_parse_from(["landing", "detect", "x.ply", "--segmentation", name]).map(|cli| {
+                match cli.command {
+                    Command::Detect(a) => a.pipeline.segmentation,
+                    other => panic!("{other:?}"),
+                }
+            })
+        };
+        for mode in SegmentationMode::all() {
+            assert_eq!(parse(mode.cli_name()).unwrap(), mode);
+        }
+        assert_eq!(parse("auto").unwrap(), SegmentationMode::Unspecified);
+        assert!(parse("unspecified").is_err());
+        let fused = stream_config(true, Overflow::Latest, 0, PipelineOptions::default());
+        assert!(fused.fusion.is_some());
+        assert_eq!(fused.max_in_flight, 1);
+        assert!(
+            stream_config(false, Overflow::Block, 4, PipelineOptions::default())
+                .fusion
+                .is_none()
+        );
+    }
 
     async fn run_capture(args: &[&str]) -> (u8, String) {
         let mut out = Vec::new();
