@@ -193,7 +193,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_layout_pack_writes_reads_back() {
+    fn pack_writes_every_layout_and_unpack_reads_it_back() {
         let points = [[1.5f32, -2.0, 3.25], [0.0, 1e6, -7.0]];
         let intensities = [0.5f32, 9.0];
         let classes = [4u8, 13];
