@@ -215,7 +215,7 @@ impl v1::landing_service_server::LandingService for LandingService {
                         Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
                         Err(e) => Fusing::Refused(e),
                     },
-                    _ => Fusing::Off,
+                    None => Fusing::Off,
                 });
                 let (parts, turn) = match fusing {
                     Fusing::Off => (
