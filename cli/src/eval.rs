@@ -215,11 +215,8 @@ pub async fn eval_cmd(
         },
         overlay_dir: Some(args.out.join("frames")),
         overlay_all: args.overlays,
-        // The server's defaults for everything but `enabled`.
-        stream: args.stream.then(|| FusionOptions {
-            enabled: true,
-            ..Default::default()
-        }),
+        // Fused, with the server's defaults.
+        stream: args.stream.then(FusionOptions::default),
         stream_max_in_flight: args.window as usize,
         tolerance_m: args.tolerance,
         ..Default::default()

@@ -150,7 +150,7 @@ impl Pipeline {
         requested: SegmentationMode,
     ) -> Result<SegmentationMode, Error> {
         match requested {
-            SegmentationMode::Auto => Ok(if frame.class_image.is_some() {
+            SegmentationMode::Unspecified => Ok(if frame.class_image.is_some() {
                 SegmentationMode::ClassImage
             } else if frame.image.is_some() && self.segmenter.is_some() {
                 SegmentationMode::Model
@@ -350,7 +350,7 @@ fn classify(
             Some(out.classes)
         }
         SegmentationMode::PointClasses => frame.cloud.classes.clone(),
-        SegmentationMode::None | SegmentationMode::Auto => None,
+        SegmentationMode::None | SegmentationMode::Unspecified => None,
     };
     Ok(Classified {
         points,
@@ -560,12 +560,12 @@ mod tests {
         let p = Pipeline::default();
         let with_classes = frame(vec![], Some(vec![]));
         assert_eq!(
-            p.resolve_mode(&with_classes, SegmentationMode::Auto),
+            p.resolve_mode(&with_classes, SegmentationMode::Unspecified),
             Ok(SegmentationMode::PointClasses)
         );
         let bare = frame(vec![], None);
         assert_eq!(
-            p.resolve_mode(&bare, SegmentationMode::Auto),
+            p.resolve_mode(&bare, SegmentationMode::Unspecified),
             Ok(SegmentationMode::None)
         );
         let e = p
@@ -598,7 +598,7 @@ mod tests {
             },
         });
         assert_eq!(
-            p.resolve_mode(&with_class_image, SegmentationMode::Auto),
+            p.resolve_mode(&with_class_image, SegmentationMode::Unspecified),
             Ok(SegmentationMode::ClassImage)
         );
     }

@@ -28,9 +28,6 @@ use crate::noise::{PoseNoise, body_errors};
 use crate::truth::{RoofTruth, TruthConfig, ground_truth};
 use crate::world::{World, WorldConfig};
 
-/// Bytes per packed point: x, y, z, intensity (FLOAT32) and class (UINT8).
-pub const POINT_STRIDE: u32 = 17;
-
 /// Start time of every recording (2026-01-01T00:00:00Z), so that files are reproducible.
 pub const START_UNIX_S: i64 = 1_767_225_600;
 
@@ -229,31 +226,22 @@ fn ring(points: &[[f64; 2]], z: f64) -> v1::LinearRing {
     }
 }
 
-/// Packs points (LiDAR frame) as x, y, z, intensity FLOAT32 + class UINT8, stride 17.
-pub fn pack_points(points: &[LidarPoint]) -> Vec<u8> {
-    let mut data = Vec::with_capacity(points.len() * POINT_STRIDE as usize);
-    for p in points {
-        for v in [p.local[0], p.local[1], p.local[2], p.intensity] {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        data.push(p.class);
+/// The scan in the LiDAR frame, packed as the API's point clouds are (x, y, z, intensity float32
+/// and the true class byte: [`landing_proto::cloud::pack`]).
+fn lidar_cloud(
+    ts: prost_types::Timestamp,
+    pose: v1::Pose,
+    points: &[LidarPoint],
+) -> v1::PointCloud {
+    let xyz: Vec<[f32; 3]> = points.iter().map(|p| p.local).collect();
+    let intensities: Vec<f32> = points.iter().map(|p| p.intensity).collect();
+    let classes: Vec<u8> = points.iter().map(|p| p.class).collect();
+    v1::PointCloud {
+        timestamp: Some(ts),
+        frame_id: "lidar".to_string(),
+        pose: Some(pose),
+        ..landing_proto::cloud::pack(&xyz, Some(&intensities), Some(&classes))
     }
-    data
-}
-
-fn fields() -> Vec<v1::PackedElementField> {
-    let f = |name: &str, offset: u32, t: v1::NumericType| v1::PackedElementField {
-        name: name.to_string(),
-        offset,
-        r#type: t as i32,
-    };
-    vec![
-        f("x", 0, v1::NumericType::Float32),
-        f("y", 4, v1::NumericType::Float32),
-        f("z", 8, v1::NumericType::Float32),
-        f("intensity", 12, v1::NumericType::Float32),
-        f("class", 16, v1::NumericType::Uint8),
-    ]
 }
 
 fn calibration(i: &Intrinsics) -> v1::CameraCalibration {
@@ -282,14 +270,7 @@ pub fn frame_messages(
         drone_id: config.drone_id.clone(),
         sequence: f.sequence,
         timestamp: Some(ts),
-        point_cloud: Some(v1::PointCloud {
-            timestamp: Some(ts),
-            frame_id: "lidar".to_string(),
-            pose: Some(lidar_pose),
-            point_stride: POINT_STRIDE,
-            fields: fields(),
-            data: pack_points(&f.points),
-        }),
+        point_cloud: Some(lidar_cloud(ts, lidar_pose, &f.points)),
         image: Some(camera_png(ts, cam_pose, f, encode_rgb_png(&f.image)?)),
         geodetic_origin: None,
         // The true labels travel on their own topic, so that a replay is segmented by the server.
@@ -321,7 +302,7 @@ fn camera_png(
         pose: Some(pose),
         calibration: Some(calibration(&f.intrinsics)),
         image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-            data: png,
+            data: png.into(),
             format: "png".to_string(),
         })),
     }
