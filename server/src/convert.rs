@@ -838,7 +838,6 @@ pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
         max_jump_m: Some(p.max_jump_m),
         register_scans: Some(p.register_scans),
         max_pixel_footprint_m: Some(p.max_pixel_footprint_m),
-        ..Default::default()
     }
 }
 
