@@ -309,8 +309,14 @@ impl World {
                         yaw: a.yaw - was.yaw,
                         shift: [a.center[0] - was.center[0], a.center[1] - was.center[1]],
                     };
+                    // An asset that stays keeps its primitives bit for bit.
+                    let stays = a.center == was.center && a.yaw == was.yaw;
                     prims.extend(kept[old].iter().map(|p| Prim {
-                        shape: motion.shape(p.shape),
+                        shape: if stays {
+                            p.shape
+                        } else {
+                            motion.shape(p.shape)
+                        },
                         building: bi,
                         asset: ai as u32,
                         ..*p
