@@ -58,7 +58,8 @@ pub struct RecordConfig {
 }
 
 /// One visit of a roof: the first flies today's approach at [`START_UNIX_S`]; a later one starts
-/// `start_offset_s` later and draws its own heading, aim, pose error and sensor noise.
+/// `start_offset_s` later and draws its own heading, aim, pose error and sensor noise, as another
+/// drone's approach would. The light stays (the world's sun is part of the world).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Visit {
     /// 0 for the first visit.

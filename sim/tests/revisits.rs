@@ -221,6 +221,23 @@ fn the_truth_of_a_visit_is_the_world_at_that_visit() {
         let i = c.asset_index.unwrap() as u32;
         checked += 1;
         hit += usize::from(frames.iter().any(|f| f.points.iter().any(|p| p.asset == i)));
+        // What the scan hits of it lies on its new footprint: its primitives moved with it.
+        let a = &next.assets[i as usize];
+        let (s, co) = a.yaw.sin_cos();
+        for p in frames
+            .iter()
+            .flat_map(|f| &f.points)
+            .filter(|p| p.asset == i)
+        {
+            let d = [p.world[0] - a.center[0], p.world[1] - a.center[1]];
+            let local = [co * d[0] + s * d[1], -s * d[0] + co * d[1]];
+            assert!(
+                (0..2).all(|k| local[k].abs() <= a.half_extents[k] + 0.05),
+                "{:?} hit at {local:?}, half extents {:?}",
+                a.kind,
+                a.half_extents
+            );
+        }
     }
     assert!(
         checked >= 4 && hit * 2 > checked,
