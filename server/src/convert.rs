@@ -9,12 +9,12 @@ use landing_proto::v1;
 use nalgebra::Isometry3;
 
 use crate::config::FusionConfig;
-use crate::geodetic::Geodetic;
 use crate::pipeline::{
     CameraImage, Cloud, Frame, FrameOptions, FrameOutput, ImagePixels, Intrinsics,
     SegmentationMode, Site, StageTimings, StreamMap, pose,
 };
 use crate::{Error, FieldViolation};
+use landing_geometry::geodetic::Geodetic;
 
 /// Largest coordinate magnitude accepted, metres: beyond this a value is corrupt, not a city.
 pub const MAX_COORDINATE_M: f64 = 1.0e7;

@@ -6,7 +6,7 @@
 use landing_geometry::Params;
 use nalgebra::Isometry3;
 
-use crate::geodetic::Geodetic;
+use landing_geometry::geodetic::Geodetic;
 
 /// Where the point classes of a frame come from: the API's enum, the one definition.
 /// `Unspecified` is "auto": the frame's class image if it has one, else the model if the frame

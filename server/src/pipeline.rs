@@ -17,8 +17,8 @@ use crate::Error;
 pub use crate::frame::{
     CameraImage, Cloud, Frame, FrameOptions, ImagePixels, Intrinsics, SegmentationMode,
 };
-use crate::geodetic::{Geodetic, enu_to_geodetic};
 use crate::segmentation::{self, Judged, PointView, Segmenter};
+use landing_geometry::geodetic::{Geodetic, enu_to_geodetic};
 
 mod fused;
 pub use fused::run_fused;

@@ -2,9 +2,8 @@
 //! Manhattan places of the scenario worlds.
 //!
 //! A world's frame is local east-north-up, metres, with its origin at a [`Geodetic`] position;
-//! [`enu_to_geodetic`] goes through earth-centred ECEF exactly as the server does when it puts
-//! latitude and longitude on its sites, so the simulator's footprints and the service's sites
-//! agree to well below a millimetre.
+//! [`enu_to_geodetic`] is `landing_geometry`'s, the one the server puts latitude and longitude on
+//! its sites with, so the simulator's footprints and the service's sites agree exactly.
 //!
 //! [`scenario_origin`] places the world of a seed on the Manhattan blocks of the paper's rooftop
 //! analysis: a grid of [`GRID_ACROSS`] × [`GRID_ALONG`] cells [`CELL_M`] apart, laid along the
@@ -24,21 +23,16 @@
 
 use landing_proto::v1;
 
-/// A WGS-84 position: degrees, and metres above the ellipsoid.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Geodetic {
-    pub latitude_deg: f64,
-    pub longitude_deg: f64,
-    pub altitude_m: f64,
-}
+pub use landing_geometry::geodetic::{
+    Geodetic, ecef_to_geodetic, enu_to_geodetic, geodetic_to_ecef,
+};
 
-impl From<Geodetic> for v1::GeodeticPoint {
-    fn from(g: Geodetic) -> Self {
-        v1::GeodeticPoint {
-            latitude_deg: g.latitude_deg,
-            longitude_deg: g.longitude_deg,
-            altitude_m: g.altitude_m,
-        }
+/// `g` as the API carries it (`Frame.geodetic_origin`).
+pub fn geodetic_point(g: Geodetic) -> v1::GeodeticPoint {
+    v1::GeodeticPoint {
+        latitude_deg: g.latitude_deg,
+        longitude_deg: g.longitude_deg,
+        altitude_m: g.altitude_m,
     }
 }
 
@@ -93,68 +87,6 @@ pub fn max_world_extent_m() -> f64 {
         }
     }
     best
-}
-
-/// WGS-84 semi-major axis, metres.
-const A: f64 = 6_378_137.0;
-/// WGS-84 flattening.
-const F: f64 = 1.0 / 298.257_223_563;
-/// First eccentricity squared.
-const E2: f64 = F * (2.0 - F);
-
-/// The geodetic position of the point `enu` (east, north, up metres) of the local frame whose
-/// origin is `origin`.
-pub fn enu_to_geodetic(origin: Geodetic, enu: [f64; 3]) -> Geodetic {
-    let [x0, y0, z0] = geodetic_to_ecef(origin);
-    let (slat, clat) = origin.latitude_deg.to_radians().sin_cos();
-    let (slon, clon) = origin.longitude_deg.to_radians().sin_cos();
-    let [e, n, u] = enu;
-    let dx = -slon * e - slat * clon * n + clat * clon * u;
-    let dy = clon * e - slat * slon * n + clat * slon * u;
-    let dz = clat * n + slat * u;
-    ecef_to_geodetic([x0 + dx, y0 + dy, z0 + dz])
-}
-
-/// Earth-centred, earth-fixed coordinates of a geodetic position.
-pub fn geodetic_to_ecef(g: Geodetic) -> [f64; 3] {
-    let (slat, clat) = g.latitude_deg.to_radians().sin_cos();
-    let (slon, clon) = g.longitude_deg.to_radians().sin_cos();
-    let n = A / (1.0 - E2 * slat * slat).sqrt();
-    [
-        (n + g.altitude_m) * clat * clon,
-        (n + g.altitude_m) * clat * slon,
-        (n * (1.0 - E2) + g.altitude_m) * slat,
-    ]
-}
-
-/// The geodetic position of ECEF coordinates (fixed-point iteration on the latitude, bounded:
-/// each step gains several digits, and points near the surface converge in a handful).
-pub fn ecef_to_geodetic(p: [f64; 3]) -> Geodetic {
-    let [x, y, z] = p;
-    let lon = y.atan2(x);
-    let r = x.hypot(y);
-    let mut lat = z.atan2(r * (1.0 - E2));
-    let mut h = 0.0;
-    for _ in 0..10 {
-        let s = lat.sin();
-        let n = A / (1.0 - E2 * s * s).sqrt();
-        h = if lat.cos().abs() > 1e-10 {
-            r / lat.cos() - n
-        } else {
-            z.abs() - n * (1.0 - E2)
-        };
-        let next = z.atan2(r * (1.0 - E2 * n / (n + h)));
-        let done = (next - lat).abs() < 1e-14;
-        lat = next;
-        if done {
-            break;
-        }
-    }
-    Geodetic {
-        latitude_deg: lat.to_degrees(),
-        longitude_deg: lon.to_degrees(),
-        altitude_m: h,
-    }
 }
 
 #[cfg(test)]

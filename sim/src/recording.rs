@@ -338,7 +338,7 @@ pub fn frame_messages(
         timestamp: Some(ts),
         point_cloud: Some(lidar_cloud(ts, lidar_pose, &f.points)),
         image: Some(camera_png(ts, cam_pose, f, encode_rgb_png(&f.image)?)),
-        geodetic_origin: config.geodetic_origin.map(Into::into),
+        geodetic_origin: config.geodetic_origin.map(crate::geodetic::geodetic_point),
         // The true labels travel on their own topic, so that a replay is segmented by the server.
         class_image: None,
     };

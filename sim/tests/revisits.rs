@@ -302,7 +302,7 @@ fn the_origin_is_carried_and_changes_nothing_else() {
     write_scenarios(&small_set(Origin::None, None), &plain).unwrap();
     write_scenarios(&small_set(Origin::Manhattan, None), &placed).unwrap();
     assert!(placed.join(FOOTPRINTS).is_file() && !placed.join(MANIFEST).exists());
-    let origin = landing_proto::v1::GeodeticPoint::from(scenario_origin(2026));
+    let origin = landing_sim::geodetic::geodetic_point(scenario_origin(2026));
     for name in ["w2026-b029.mcap", "w2026-b083.mcap"] {
         let a = read_pairs(&plain.join(name)).unwrap();
         let mut b = read_pairs(&placed.join(name)).unwrap();
