@@ -26,6 +26,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::write(out_dir.join("landing_descriptor.bin"), fds.encode_to_vec())?;
 
     tonic_prost_build::configure()
+        // Scans and images as `bytes::Bytes`: a retried or re-sent frame clones a reference
+        // count, not the buffer.
+        .bytes(".landing.v1")
         .build_server(true)
         .build_client(true)
         .compile_fds(fds)?;

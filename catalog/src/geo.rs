@@ -9,6 +9,8 @@
 //! metres. Areas that cross the antimeridian or reach a pole are not supported (they are refused at
 //! validation: no ring may span more than [`MAX_SPAN_DEG`]).
 
+use landing_geometry::polylabel::{PolylabelParams, polylabel_in_rings};
+
 use crate::error::{Error, Result};
 
 /// The mean radius of the WGS-84 ellipsoid, (2a + b) / 3, in metres.
@@ -155,9 +157,23 @@ impl Polygon {
             return (LatLon::default(), 0.0);
         };
         let frame = LocalFrame::new(origin);
-        let rings: Vec<Vec<(f64, f64)>> = self.rings().map(|r| frame.ring(r)).collect();
-        let (x, y, d) = polylabel(&rings, precision_m.max(1e-3));
-        (frame.to_lat_lon((x, y)), d)
+        let rings: Vec<Vec<[f64; 2]>> = self
+            .rings()
+            .map(|r| frame.ring(r).into_iter().map(|(x, y)| [x, y]).collect())
+            .collect();
+        let ring_refs: Vec<&[[f64; 2]]> = rings.iter().map(Vec::as_slice).collect();
+        let params = PolylabelParams {
+            precision_m: precision_m.max(landing_geometry::MIN_POLYLABEL_PRECISION_M),
+            ..PolylabelParams::default()
+        };
+        match polylabel_in_rings(&ring_refs, &[], &params) {
+            Ok(pole) => (
+                frame.to_lat_lon((pole.center[0], pole.center[1])),
+                pole.distance,
+            ),
+            // The search ran out of cells: no circle is claimed.
+            Err(_) => (origin, 0.0),
+        }
     }
 }
 
@@ -392,103 +408,6 @@ fn ring_distance(p: (f64, f64), ring: &[(f64, f64)]) -> f64 {
     (0..n)
         .map(|i| segment_distance(p, ring[i], ring[(i + 1) % n]))
         .fold(f64::INFINITY, f64::min)
-}
-
-/// Signed distance from `p` to the polygon (`rings[0]` outer): positive inside.
-fn signed_distance(rings: &[Vec<(f64, f64)>], p: (f64, f64)) -> f64 {
-    let inside = point_in_ring(&rings[0], p) && !rings[1..].iter().any(|h| point_in_ring(h, p));
-    let d = rings
-        .iter()
-        .map(|r| ring_distance(p, r))
-        .fold(f64::INFINITY, f64::min);
-    if inside { d } else { -d }
-}
-
-/// Mapbox's polylabel: a best-first search over square cells, bounded by the cell count.
-fn polylabel(rings: &[Vec<(f64, f64)>], precision: f64) -> (f64, f64, f64) {
-    #[derive(Clone, Copy)]
-    struct Cell {
-        x: f64,
-        y: f64,
-        h: f64,
-        d: f64,
-        max: f64,
-    }
-    impl PartialEq for Cell {
-        fn eq(&self, o: &Self) -> bool {
-            self.max.total_cmp(&o.max).is_eq()
-        }
-    }
-    impl Eq for Cell {}
-    impl PartialOrd for Cell {
-        fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
-            Some(self.cmp(o))
-        }
-    }
-    impl Ord for Cell {
-        fn cmp(&self, o: &Self) -> std::cmp::Ordering {
-            self.max.total_cmp(&o.max)
-        }
-    }
-    let cell = |x: f64, y: f64, h: f64| {
-        let d = signed_distance(rings, (x, y));
-        Cell {
-            x,
-            y,
-            h,
-            d,
-            max: d + h * std::f64::consts::SQRT_2,
-        }
-    };
-    let (mut min_x, mut min_y, mut max_x, mut max_y) = (
-        f64::INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for &(x, y) in &rings[0] {
-        (min_x, min_y, max_x, max_y) = (min_x.min(x), min_y.min(y), max_x.max(x), max_y.max(y));
-    }
-    let size = (max_x - min_x).min(max_y - min_y);
-    if size <= 0.0 || !size.is_finite() {
-        return (min_x, min_y, 0.0);
-    }
-    let h = size / 2.0;
-    let mut queue = std::collections::BinaryHeap::new();
-    let mut x = min_x;
-    while x < max_x {
-        let mut y = min_y;
-        while y < max_y {
-            queue.push(cell(x + h, y + h, h));
-            y += size;
-        }
-        x += size;
-    }
-    // The centroid of the outer ring's vertices is a cheap first guess.
-    let n = rings[0].len() as f64;
-    let (cx, cy) = rings[0]
-        .iter()
-        .fold((0.0, 0.0), |(sx, sy), &(x, y)| (sx + x / n, sy + y / n));
-    let mut best = cell(cx, cy, 0.0);
-    // Bounded: a degenerate ring cannot make the search spin.
-    let mut budget = 100_000_usize;
-    while let Some(c) = queue.pop() {
-        if c.d > best.d {
-            best = c;
-        }
-        if c.max - best.d <= precision {
-            continue;
-        }
-        budget = budget.saturating_sub(1);
-        if budget == 0 {
-            break;
-        }
-        let h = c.h / 2.0;
-        for (dx, dy) in [(-h, -h), (h, -h), (-h, h), (h, h)] {
-            queue.push(cell(c.x + dx, c.y + dy, h));
-        }
-    }
-    (best.x, best.y, best.d.max(0.0))
 }
 
 #[cfg(test)]

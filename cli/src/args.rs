@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use clap::Args;
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use landing_client::{ClientConfig, ClientError, LandingClient, TlsConfig};
+use landing_proto::v1::SegmentationMode;
 
 /// Process exit codes of `landing`.
 pub mod exit {
@@ -25,8 +27,10 @@ pub mod exit {
     pub const AUTH: u8 = 6;
 }
 
-/// How to reach the server; the same options as the server's TLS and auth settings.
+/// How to reach the server; the same options as the server's TLS and auth settings. Listed
+/// under their own heading in `--help`.
 #[derive(Debug, Clone, Args)]
+#[command(next_help_heading = "Connection")]
 pub struct ConnectionArgs {
     /// Server URL (`https://` for TLS).
     #[arg(long, global = true, env = "LANDING_SERVER", default_value = landing_client::DEFAULT_SERVER)]
@@ -52,6 +56,34 @@ pub struct ConnectionArgs {
     /// Deadline of each unary call, seconds.
     #[arg(long, global = true, default_value_t = 60.0)]
     pub timeout: f64,
+}
+
+/// `--segmentation`: the API's `SegmentationMode` by its command-line name
+/// ([`SegmentationMode::cli_name`]: `auto`, `model`, `point-classes`, `none`, `class-image`).
+pub fn segmentation_parser() -> impl TypedValueParser<Value = SegmentationMode> {
+    let values = SegmentationMode::all()
+        .map(|m| PossibleValue::new(m.cli_name()).help(segmentation_help(m)));
+    PossibleValuesParser::new(values).try_map(|name: String| {
+        SegmentationMode::from_cli_name(&name).ok_or_else(|| format!("unknown mode `{name}`"))
+    })
+}
+
+/// What each `--segmentation` value does, for `--help`.
+fn segmentation_help(mode: SegmentationMode) -> &'static str {
+    match mode {
+        SegmentationMode::Unspecified => {
+            "The server decides: the model when the frame has an image"
+        }
+        SegmentationMode::Model => "The server's segmentation model",
+        SegmentationMode::ClassImage => {
+            "The recording's label images (`/camera/labels`, the simulator's ground truth) sent \
+             as each frame's class image, as a drone with its own segmentation would"
+        }
+        SegmentationMode::PointClasses => {
+            "The classes carried by the point cloud (ground truth in recordings)"
+        }
+        SegmentationMode::None => "Geometry only",
+    }
 }
 
 /// A failure with the exit code it maps to.

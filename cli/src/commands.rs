@@ -18,9 +18,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
+use landing_proto::json::mode_name;
 use landing_proto::v1::{
-    Frame, FrameResult, FusionOptions, LandingSite, OverflowPolicy, PipelineOptions,
-    SegmentationMode, ServiceInfo, StreamLandingSitesResponse, stream_landing_sites_response,
+    Frame, FrameResult, LandingSite, OverflowPolicy, PipelineOptions, SegmentationMode,
+    ServiceInfo, StreamLandingSitesResponse, stream_landing_sites_response,
 };
 use serde_json::{Value, json};
 
@@ -42,11 +43,12 @@ const AFTER_HELP: &str = "Exit codes: 0 ok, 1 error, 2 usage, 3 server unreachab
 #[derive(Debug, Parser)]
 #[command(name = "landing", version, about, after_help = AFTER_HELP)]
 pub struct Cli {
-    #[command(flatten)]
-    pub connection: ConnectionArgs,
     /// Print machine-readable JSON instead of tables.
     #[arg(long, global = true)]
     pub json: bool,
+    // Last among the flags: its `next_help_heading` ("Connection") holds for what follows.
+    #[command(flatten)]
+    pub connection: ConnectionArgs,
     #[command(subcommand)]
     pub command: Command,
 }
@@ -73,8 +75,8 @@ pub enum Command {
 #[derive(Debug, Clone, Args)]
 pub struct PipelineArgs {
     /// Where point classes come from.
-    #[arg(long, value_enum, default_value_t = Segmentation::Auto)]
-    pub segmentation: Segmentation,
+    #[arg(long, value_parser = crate::args::segmentation_parser(), default_value = "auto")]
+    pub segmentation: SegmentationMode,
     /// l_max: longest triangle edge, metres.
     #[arg(long)]
     pub max_triangle_edge: Option<f64>,
@@ -95,22 +97,6 @@ pub struct PipelineArgs {
     pub max_sites: Option<u32>,
 }
 
-/// `--segmentation` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Segmentation {
-    /// The server decides: the model when the frame has an image.
-    Auto,
-    /// The server's segmentation model.
-    Model,
-    /// The recording's label images (`/camera/labels`, the simulator's ground truth) sent as
-    /// each frame's class image, as a drone with its own segmentation would.
-    ClassImage,
-    /// The classes carried by the point cloud (ground truth in recordings).
-    PointClasses,
-    /// Geometry only.
-    None,
-}
-
 impl PipelineArgs {
     fn options(&self) -> PipelineOptions {
         PipelineOptions {
@@ -120,13 +106,7 @@ impl PipelineArgs {
             polylabel_precision_m: self.polylabel_precision,
             min_safe_radius_m: self.min_safe_radius,
             max_sites: self.max_sites,
-            segmentation_mode: match self.segmentation {
-                Segmentation::Auto => SegmentationMode::Unspecified,
-                Segmentation::Model => SegmentationMode::Model,
-                Segmentation::ClassImage => SegmentationMode::ClassImage,
-                Segmentation::PointClasses => SegmentationMode::PointClasses,
-                Segmentation::None => SegmentationMode::None,
-            } as i32,
+            segmentation_mode: self.segmentation as i32,
             ..Default::default()
         }
     }
@@ -184,12 +164,24 @@ pub enum Overflow {
     Latest,
 }
 
-/// The fusion a `--fuse` flag asks for: on, with the server's defaults.
-fn fusion_options(fuse: bool) -> Option<FusionOptions> {
-    fuse.then(|| FusionOptions {
-        enabled: true,
-        ..FusionOptions::default()
-    })
+/// The stream the flags ask for: fused (with the server's `[fusion]` defaults) with `--fuse`.
+fn stream_config(
+    fuse: bool,
+    overflow: Overflow,
+    window: usize,
+    options: PipelineOptions,
+) -> StreamConfig {
+    let stream = if fuse {
+        StreamConfig::fused()
+    } else {
+        StreamConfig::single_frame()
+    };
+    StreamConfig {
+        max_in_flight: window.max(1),
+        ..stream
+            .with_overflow_policy(overflow.policy())
+            .with_options(options)
+    }
 }
 
 impl Overflow {
@@ -304,7 +296,7 @@ fn recorded_frames(path: &Path, pipeline: &PipelineArgs) -> Result<Vec<RecordedF
         code: exit::ERROR,
         message: format!("recording `{}`: {e}", path.display()),
     })?;
-    if pipeline.segmentation == Segmentation::ClassImage {
+    if pipeline.segmentation == SegmentationMode::ClassImage {
         for f in &mut frames {
             let labels = f.labels.take().ok_or_else(|| {
                 usage(format!(
@@ -325,7 +317,7 @@ fn load_frame(path: &Path, index: usize, pipeline: &PipelineArgs) -> Result<Fram
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("ply"));
     if is_ply {
-        if pipeline.segmentation == Segmentation::ClassImage {
+        if pipeline.segmentation == SegmentationMode::ClassImage {
             return Err(usage(format!(
                 "--segmentation class-image sends a recording's label images; {} is a PLY scan \
                  without one",
@@ -406,12 +398,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         )?)),
         None => None,
     };
-    let config = StreamConfig {
-        overflow_policy: a.overflow.policy(),
-        options: Some(a.pipeline.options()),
-        max_in_flight: a.window.max(1),
-        fusion: fusion_options(a.fuse),
-    };
+    let config = stream_config(a.fuse, a.overflow, a.window, a.pipeline.options());
     let summary = replay_frames(&client, &frames, config, a.rate, |rec, item| {
         if cli.json {
             writeln!(out, "{}", item_json(item))?;
@@ -565,12 +552,7 @@ async fn loadtest(
         streams: a.streams,
         rate_hz: a.rate,
         duration: Duration::from_secs_f64(a.duration),
-        stream: StreamConfig {
-            overflow_policy: a.overflow.policy(),
-            options: Some(a.pipeline.options()),
-            max_in_flight: a.window.max(1),
-            fusion: fusion_options(a.fuse),
-        },
+        stream: stream_config(a.fuse, a.overflow, a.window, a.pipeline.options()),
     };
     let show = std::io::stderr().is_terminal();
     let progress = move |answered: u64, elapsed: Duration| {
@@ -711,21 +693,8 @@ fn options_pairs(o: &PipelineOptions) -> Vec<(&'static str, String)> {
             o.max_sites.map_or("-".into(), |v| v.to_string()),
         ),
         ("landable_classes", format!("{:?}", o.landable_classes)),
-        (
-            "segmentation_mode",
-            segmentation_name(o.segmentation_mode).to_owned(),
-        ),
+        ("segmentation_mode", mode_name(o.segmentation_mode)),
     ]
-}
-
-fn segmentation_name(mode: i32) -> &'static str {
-    match SegmentationMode::try_from(mode) {
-        Ok(SegmentationMode::Model) => "model",
-        Ok(SegmentationMode::ClassImage) => "class_image",
-        Ok(SegmentationMode::PointClasses) => "point_classes",
-        Ok(SegmentationMode::None) => "none",
-        _ => "unspecified",
-    }
 }
 
 fn info_json(info: &ServiceInfo) -> Value {
@@ -759,7 +728,7 @@ fn print_result(r: &FrameResult, out: &mut (dyn Write + Send)) -> std::io::Resul
         },
         r.point_count,
         r.triangle_count,
-        segmentation_name(r.segmentation_mode),
+        mode_name(r.segmentation_mode),
         r.sites.len(),
         total
             .map(|t| format!(", {:.1} ms", t.as_secs_f64() * 1e3))
@@ -780,14 +749,14 @@ fn print_result(r: &FrameResult, out: &mut (dyn Write + Send)) -> std::io::Resul
 }
 
 fn site_row(s: &LandingSite) -> String {
-    let c = s.center.unwrap_or_default();
+    let [x, y, z] = s.center_xyz().unwrap_or_default();
     format!(
         "{:>4}  {:>9.2}  {:>9.1}  {:>28}  {:>6}  {:>6}",
         s.rank,
         s.safe_radius_m,
         s.area_m2,
-        format!("({:.2}, {:.2}, {:.2})", c.x, c.y, c.z),
-        s.polygon.as_ref().map_or(0, |p| p.holes.len()),
+        format!("({x:.2}, {y:.2}, {z:.2})"),
+        s.holes().len(),
         s.point_count
     )
 }
@@ -860,61 +829,9 @@ fn print_load_report(r: &LoadTestReport, out: &mut (dyn Write + Send)) -> std::i
     Ok(())
 }
 
-/// The JSON form of a frame result (used by `--json` and JSON lines).
-pub fn result_json(r: &FrameResult) -> Value {
-    let ms = |d: Option<prost_types::Duration>| {
-        d.and_then(duration_from_proto)
-            .map(|d| d.as_secs_f64() * 1e3)
-    };
-    let t = r.timings.unwrap_or_default();
-    let timings: serde_json::Map<String, Value> = landing_proto::STAGES
-        .iter()
-        .zip(t.by_stage())
-        .map(|(name, d)| (name.to_string(), json!(ms(d))))
-        .collect();
-    json!({
-        "drone_id": r.drone_id,
-        "sequence": r.sequence,
-        "segmentation_mode": segmentation_name(r.segmentation_mode),
-        "point_count": r.point_count,
-        "triangle_count": r.triangle_count,
-        "timings_ms": timings,
-        "sites": r.sites.iter().map(site_json).collect::<Vec<_>>(),
-        "fusion": r.fusion.as_ref().map(|f| json!({
-            "frames": f.frames, "points": f.points, "cells": f.cells,
-            "reset_reason": (!f.reset_reason.is_empty()).then_some(&f.reset_reason),
-            "keep_out_frames": f.keep_out_frames,
-            "registration": f.registration.map(|r| json!({
-                "translation_m": r.translation_m, "rotation_deg": r.rotation_deg,
-                "matched_points": r.matched_points, "rms_before_m": r.rms_before_m, "rms_after_m": r.rms_after_m,
-            })),
-            "registration_skipped": (!f.registration_skipped.is_empty()).then_some(&f.registration_skipped),
-        })),
-    })
-}
-
-fn site_json(s: &LandingSite) -> Value {
-    let v3 = |v: Option<landing_proto::v1::Vector3>| v.map(|v| json!([v.x, v.y, v.z]));
-    let ring = |r: &landing_proto::v1::LinearRing| {
-        r.points
-            .iter()
-            .map(|p| json!([p.x, p.y, p.z]))
-            .collect::<Vec<_>>()
-    };
-    json!({
-        "rank": s.rank,
-        "safe_radius_m": s.safe_radius_m,
-        "area_m2": s.area_m2,
-        "center": v3(s.center),
-        "center_geodetic": s.center_geodetic.map(|g| json!({"latitude_deg": g.latitude_deg, "longitude_deg": g.longitude_deg, "altitude_m": g.altitude_m})),
-        "normal": v3(s.normal),
-        "plane_height_m": s.polygon.as_ref().map(|p| p.plane_height_m),
-        "shell": s.polygon.as_ref().and_then(|p| p.shell.as_ref()).map(ring),
-        "holes": s.polygon.as_ref().map(|p| p.holes.iter().map(ring).collect::<Vec<_>>()),
-        "point_count": s.point_count,
-        "triangle_count": s.triangle_count,
-    })
-}
+/// The JSON form of a frame result (used by `--json` and JSON lines): the one schema, which
+/// `landing-server detect --json` prints too.
+pub use landing_proto::json::frame_result as result_json;
 
 /// The JSON line of one stream answer.
 pub fn item_json(item: &StreamItem) -> Value {
@@ -958,6 +875,52 @@ fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn help_lists_the_connection_flags_under_their_own_heading() {
+        use clap::CommandFactory;
+        let help = Cli::command().render_long_help().to_string();
+        let (options, connection) = help.split_once("\nConnection:\n").expect("a heading");
+        assert!(options.contains("--json"), "{help}");
+        for flag in [
+            "--server",
+            "--token",
+            "--ca-cert",
+            "--tls-domain",
+            "--timeout",
+        ] {
+            assert!(
+                connection.contains(flag),
+                "{flag} not under Connection: {help}"
+            );
+            assert!(!options.contains(flag), "{flag} outside Connection: {help}");
+        }
+    }
+
+    #[test]
+    fn segmentation_names_are_the_api_modes() {
+        let parse = |name: &str| {
+            Cli::try_parse_from(["landing", "detect", "x.ply", "--segmentation", name]).map(|cli| {
+                match cli.command {
+                    Command::Detect(a) => a.pipeline.segmentation,
+                    other => panic!("{other:?}"),
+                }
+            })
+        };
+        for mode in SegmentationMode::all() {
+            assert_eq!(parse(mode.cli_name()).unwrap(), mode);
+        }
+        assert_eq!(parse("auto").unwrap(), SegmentationMode::Unspecified);
+        assert!(parse("unspecified").is_err());
+        let fused = stream_config(true, Overflow::Latest, 0, PipelineOptions::default());
+        assert!(fused.fusion.is_some());
+        assert_eq!(fused.max_in_flight, 1);
+        assert!(
+            stream_config(false, Overflow::Block, 4, PipelineOptions::default())
+                .fusion
+                .is_none()
+        );
+    }
 
     async fn run_capture(args: &[&str]) -> (u8, String) {
         let mut out = Vec::new();
@@ -1082,7 +1045,7 @@ mod tests {
         assert_eq!(frame.class_image, labels);
         // Other modes send the frame as recorded.
         let mut plain = a.pipeline.clone();
-        plain.segmentation = Segmentation::Model;
+        plain.segmentation = SegmentationMode::Model;
         assert_eq!(load_frame(&a.input, 2, &plain).unwrap().class_image, None);
         // A PLY scan has no labels to send.
         let ply = root.join("samples/roof.ply");

@@ -7,8 +7,8 @@ use clap::Args;
 use landing_proto::v1::{FusionOptions, PipelineOptions};
 
 use landing_client::LandingClient;
-use landing_eval::report::{Mode, Targets, summarize, write_report};
-use landing_eval::run::{EvalConfig, fill_scanned_regions, run};
+use landing_eval::report::{Mode, Summary, Targets, summarize, write_report};
+use landing_eval::run::{EvalConfig, Scenario, fill_scanned_regions, run};
 use landing_eval::truth::{load_scenarios, recording_files};
 
 use crate::args::{CliError, ConnectionArgs, client_config, exit};
@@ -176,16 +176,38 @@ pub async fn eval_cmd(
     json: bool,
     out: &mut (dyn Write + Send),
 ) -> Result<u8, CliError> {
-    let usage = |m: String| CliError {
-        code: exit::USAGE,
-        message: m,
-    };
     if !(args.cell > 0.0 && args.cell <= 1.0) {
-        return Err(usage(format!(
-            "--cell {} must be in (0, 1] metres",
-            args.cell
-        )));
+        return Err(CliError {
+            code: exit::USAGE,
+            message: format!("--cell {} must be in (0, 1] metres", args.cell),
+        });
     }
+    let config = eval_config(args);
+    let mut scenarios = scenarios(args)?;
+    for s in &mut scenarios {
+        fill_scanned_regions(s, config.roof_band_m)?;
+    }
+    let client = LandingClient::connect(client_config(connection)?).await?;
+    let (records, failures) = run(&client, &scenarios, &config, |done, total| {
+        if done % 10 == 0 || done == total {
+            eprintln!("landing eval: {done}/{total} frames");
+        }
+    })
+    .await?;
+    let summary = summarize(&records, &failures, &args.modes);
+    let targets = Targets::default();
+    write_report(&args.out, &summary, &records, &targets, &args.gate)?;
+    print_summary(out, json, &summary, &targets, args)?;
+    Ok(if summary.gate_failed(&args.gate) {
+        EXIT_UNSAFE
+    } else {
+        exit::OK
+    })
+}
+
+/// The scenarios to evaluate: the recordings named, a generated set, at most `--limit` frames
+/// taken evenly.
+fn scenarios(args: &EvalArgs) -> Result<Vec<Scenario>, CliError> {
     let mut inputs = args.recordings.clone();
     if let Some(set) = args.scenarios {
         let dir = args.out.join("scenarios");
@@ -193,14 +215,19 @@ pub async fn eval_cmd(
         inputs.push(dir);
     }
     let files = recording_files(&inputs)?;
-    let mut scenarios = load_scenarios(&files)?;
-    if args.limit > 0 && scenarios.len() > args.limit {
-        let step = scenarios.len() as f64 / args.limit as f64;
-        scenarios = (0..args.limit)
-            .map(|k| scenarios[(k as f64 * step) as usize].clone())
-            .collect();
+    let scenarios = load_scenarios(&files)?;
+    if args.limit == 0 || scenarios.len() <= args.limit {
+        return Ok(scenarios);
     }
-    let config = EvalConfig {
+    let step = scenarios.len() as f64 / args.limit as f64;
+    Ok((0..args.limit)
+        .map(|k| scenarios[(k as f64 * step) as usize].clone())
+        .collect())
+}
+
+/// What every frame is sent with and scored by.
+fn eval_config(args: &EvalArgs) -> EvalConfig {
+    EvalConfig {
         modes: args.modes.clone(),
         options: PipelineOptions {
             polylabel_precision_m: args.polylabel_precision,
@@ -215,51 +242,38 @@ pub async fn eval_cmd(
         },
         overlay_dir: Some(args.out.join("frames")),
         overlay_all: args.overlays,
-        // The server's defaults for everything but `enabled`.
-        stream: args.stream.then(|| FusionOptions {
-            enabled: true,
-            ..Default::default()
-        }),
+        // Fused, with the server's defaults.
+        stream: args.stream.then(FusionOptions::default),
         stream_max_in_flight: args.window as usize,
         tolerance_m: args.tolerance,
         ..Default::default()
-    };
-    for s in &mut scenarios {
-        fill_scanned_regions(s, config.roof_band_m)?;
     }
-    let client = LandingClient::connect(client_config(connection)?).await?;
-    let (records, failures) = run(&client, &scenarios, &config, |done, total| {
-        if done % 10 == 0 || done == total {
-            eprintln!("landing eval: {done}/{total} frames");
-        }
-    })
-    .await?;
-    let summary = summarize(&records, &failures, &args.modes);
-    let targets = Targets::default();
-    let md = write_report(&args.out, &summary, &records, &targets, &args.gate)?;
+}
+
+/// The summary as a table with each gated mode's verdicts, or as JSON.
+fn print_summary(
+    out: &mut (dyn Write + Send),
+    json: bool,
+    summary: &Summary,
+    targets: &Targets,
+    args: &EvalArgs,
+) -> Result<(), CliError> {
     let io = |e: std::io::Error| CliError {
         code: exit::ERROR,
         message: format!("cannot write output: {e}"),
     };
     if json {
-        let v = serde_json::to_string_pretty(&summary).map_err(|e| CliError {
+        let v = serde_json::to_string_pretty(summary).map_err(|e| CliError {
             code: exit::ERROR,
             message: e.to_string(),
         })?;
-        writeln!(out, "{v}").map_err(io)?;
-    } else {
-        write!(out, "{}", summary.to_text()).map_err(io)?;
-        for &mode in &args.gate {
-            for (line, ok) in summary.target_lines(mode, &targets) {
-                writeln!(out, "{} {line}", if ok { "PASS" } else { "FAIL" }).map_err(io)?;
-            }
-        }
-        writeln!(out, "report: {}", args.out.join("summary.md").display()).map_err(io)?;
+        return writeln!(out, "{v}").map_err(io);
     }
-    let _ = md;
-    Ok(if summary.gate_failed(&args.gate) {
-        EXIT_UNSAFE
-    } else {
-        exit::OK
-    })
+    write!(out, "{}", summary.to_text()).map_err(io)?;
+    for &mode in &args.gate {
+        for (line, ok) in summary.target_lines(mode, targets) {
+            writeln!(out, "{} {line}", if ok { "PASS" } else { "FAIL" }).map_err(io)?;
+        }
+    }
+    writeln!(out, "report: {}", args.out.join("summary.md").display()).map_err(io)
 }

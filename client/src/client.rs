@@ -366,7 +366,8 @@ pub struct StreamConfig {
     /// At most this many frames are sent and unanswered at once.
     pub max_in_flight: usize,
     /// Approach fusion: each answer comes from the server's map of the stream's frames so far
-    /// (sent with the first frame; `None` judges every frame alone). The map lives in the server
+    /// (sent with the first frame; `Some` fuses, with the server's defaults for the unset
+    /// fields; `None` judges every frame alone). The map lives in the server
     /// process that holds the stream: when the stream breaks and the drone reconnects, possibly
     /// to another replica after a drain, fusion starts over from the next frame. A fused
     /// answer's polygons end halfway between the map's last landable points and the first points
@@ -377,12 +378,46 @@ pub struct StreamConfig {
 
 impl Default for StreamConfig {
     fn default() -> Self {
+        Self::single_frame()
+    }
+}
+
+impl StreamConfig {
+    /// A stream whose every frame is judged alone, as [`LandingClient::detect`] judges it
+    /// (the `Default`).
+    pub fn single_frame() -> Self {
         Self {
             overflow_policy: OverflowPolicy::Block,
             options: None,
             max_in_flight: 16,
             fusion: None,
         }
+    }
+
+    /// A fused stream with the server's fusion defaults (`ServiceInfo.default_fusion`): each
+    /// answer comes from the map of the stream's frames so far.
+    pub fn fused() -> Self {
+        Self::fused_with(FusionOptions::default())
+    }
+
+    /// A fused stream with these fusion options (unset fields take the server's defaults).
+    pub fn fused_with(fusion: FusionOptions) -> Self {
+        Self {
+            fusion: Some(fusion),
+            ..Self::single_frame()
+        }
+    }
+
+    /// The same stream with these pipeline options sent with every frame.
+    pub fn with_options(mut self, options: PipelineOptions) -> Self {
+        self.options = Some(options);
+        self
+    }
+
+    /// The same stream with this overflow policy.
+    pub fn with_overflow_policy(mut self, policy: OverflowPolicy) -> Self {
+        self.overflow_policy = policy;
+        self
     }
 }
 

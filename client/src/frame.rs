@@ -1,9 +1,10 @@
 //! Builders that turn raw buffers into `landing.v1` frames, and the reverse (unpacking a packed
 //! cloud) for tools that draw or compare frames.
 
+use landing_proto::cloud;
 use landing_proto::v1::{
-    CameraCalibration, CameraImage, CompressedImage, Frame, GeodeticPoint, NumericType,
-    PackedElementField, PointCloud, Pose, Quaternion, RawImage, Vector3, camera_image,
+    CameraCalibration, CameraImage, CompressedImage, Frame, GeodeticPoint, PointCloud, Pose,
+    Quaternion, RawImage, Vector3, camera_image,
 };
 
 use crate::ClientError;
@@ -80,48 +81,12 @@ impl<'a> PointCloudBuilder<'a> {
                 reason: format!("{} intensities for {n} points", i.len()),
             });
         }
-        let mut fields = vec![
-            field("x", 0, NumericType::Float32),
-            field("y", 4, NumericType::Float32),
-            field("z", 8, NumericType::Float32),
-        ];
-        let mut stride = 12u32;
-        if self.intensities.is_some() {
-            fields.push(field("intensity", stride, NumericType::Float32));
-            stride += 4;
-        }
-        if self.classes.is_some() {
-            fields.push(field("class", stride, NumericType::Uint8));
-            stride += 1;
-        }
-        let mut data = Vec::with_capacity(n * stride as usize);
-        for (i, p) in self.points.iter().enumerate() {
-            for c in p {
-                data.extend_from_slice(&c.to_le_bytes());
-            }
-            if let Some(int) = self.intensities {
-                data.extend_from_slice(&int[i].to_le_bytes());
-            }
-            if let Some(cls) = self.classes {
-                data.push(cls[i]);
-            }
-        }
         Ok(PointCloud {
             timestamp: self.timestamp,
             frame_id: self.frame_id,
             pose: self.pose,
-            point_stride: stride,
-            fields,
-            data,
+            ..cloud::pack(self.points, self.intensities, self.classes)
         })
-    }
-}
-
-fn field(name: &str, offset: u32, ty: NumericType) -> PackedElementField {
-    PackedElementField {
-        name: name.to_owned(),
-        offset,
-        r#type: ty as i32,
     }
 }
 
@@ -149,72 +114,19 @@ impl UnpackedCloud {
 
 /// Unpacks a packed cloud (FLOAT32 or FLOAT64 xyz, optional FLOAT32 intensity and UINT8 class).
 pub fn unpack_point_cloud(cloud: &PointCloud) -> Result<UnpackedCloud, ClientError> {
-    let stride = cloud.point_stride as usize;
-    if stride == 0 {
-        return Err(ClientError::InvalidInput {
-            field: "point_cloud.point_stride",
-            reason: "must be > 0".into(),
-        });
-    }
-    if !cloud.data.len().is_multiple_of(stride) {
-        return Err(ClientError::InvalidInput {
-            field: "point_cloud.data",
-            reason: format!(
-                "{} bytes is not a multiple of the stride {stride}",
-                cloud.data.len()
-            ),
-        });
-    }
-    let find = |name: &str| cloud.fields.iter().find(|f| f.name == name);
-    let read = |f: &PackedElementField, point: &[u8]| -> Option<f64> {
-        let o = f.offset as usize;
-        let ty = NumericType::try_from(f.r#type).ok()?;
-        let bytes = |n: usize| point.get(o..o + n);
-        Some(match ty {
-            NumericType::Float32 => f32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
-            NumericType::Float64 => f64::from_le_bytes(bytes(8)?.try_into().ok()?),
-            NumericType::Uint8 => *bytes(1)?.first()? as f64,
-            NumericType::Int8 => *bytes(1)?.first()? as i8 as f64,
-            NumericType::Uint16 => u16::from_le_bytes(bytes(2)?.try_into().ok()?) as f64,
-            NumericType::Int16 => i16::from_le_bytes(bytes(2)?.try_into().ok()?) as f64,
-            NumericType::Uint32 => u32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
-            NumericType::Int32 => i32::from_le_bytes(bytes(4)?.try_into().ok()?) as f64,
-            NumericType::Unspecified => return None,
-        })
-    };
-    let mut xyz = Vec::with_capacity(3);
-    for name in ["x", "y", "z"] {
-        xyz.push(find(name).ok_or(ClientError::InvalidInput {
-            field: "point_cloud.fields",
-            reason: format!("no `{name}` field"),
-        })?);
-    }
-    let intensity = find("intensity");
-    let class = find("class");
-    let n = cloud.data.len() / stride;
-    let mut out = UnpackedCloud {
-        points: Vec::with_capacity(n),
-        classes: class.map(|_| Vec::with_capacity(n)),
-        intensities: intensity.map(|_| Vec::with_capacity(n)),
-    };
-    let bad = |name: &str| ClientError::InvalidInput {
-        field: "point_cloud.fields",
-        reason: format!("field `{name}` does not fit in the stride or has an unknown type"),
-    };
-    for point in cloud.data.chunks_exact(stride) {
-        let mut p = [0f32; 3];
-        for (k, f) in xyz.iter().enumerate() {
-            p[k] = read(f, point).ok_or_else(|| bad(&f.name))? as f32;
-        }
-        out.points.push(p);
-        if let (Some(f), Some(v)) = (intensity, out.intensities.as_mut()) {
-            v.push(read(f, point).ok_or_else(|| bad("intensity"))? as f32);
-        }
-        if let (Some(f), Some(v)) = (class, out.classes.as_mut()) {
-            v.push(read(f, point).ok_or_else(|| bad("class"))? as u8);
-        }
-    }
-    Ok(out)
+    let cloud::Unpacked {
+        points,
+        classes,
+        intensities,
+    } = cloud::unpack(cloud).map_err(|e| ClientError::InvalidInput {
+        field: e.field,
+        reason: e.reason,
+    })?;
+    Ok(UnpackedCloud {
+        points,
+        classes,
+        intensities,
+    })
 }
 
 /// A pose from a position and a unit quaternion `[x, y, z, w]`.
@@ -294,14 +206,14 @@ pub fn camera_image(
         ImageData::Png(data) => (
             png_size(&data)?,
             camera_image::Image::Compressed(CompressedImage {
-                data,
+                data: data.into(),
                 format: "png".into(),
             }),
         ),
         ImageData::Jpeg(data) => (
             jpeg_size(&data)?,
             camera_image::Image::Compressed(CompressedImage {
-                data,
+                data: data.into(),
                 format: "jpeg".into(),
             }),
         ),
@@ -359,7 +271,7 @@ fn raw(
             height,
             encoding: encoding.into(),
             step: width * channels,
-            data,
+            data: data.into(),
         }),
     ))
 }
@@ -589,6 +501,7 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use landing_proto::v1::{NumericType, PackedElementField};
     use proptest::prelude::*;
 
     #[test]
@@ -626,19 +539,28 @@ mod tests {
         for v in [1.0f64, 2.0, 3.0] {
             data.extend_from_slice(&v.to_le_bytes());
         }
+        let field = |name: &str, offset| PackedElementField {
+            name: name.into(),
+            offset,
+            r#type: NumericType::Float64 as i32,
+        };
         let cloud = PointCloud {
             point_stride: 24,
-            fields: vec![
-                field("x", 0, NumericType::Float64),
-                field("y", 8, NumericType::Float64),
-                field("z", 16, NumericType::Float64),
-            ],
-            data,
+            fields: vec![field("x", 0), field("y", 8), field("z", 16)],
+            data: data.into(),
             ..Default::default()
         };
         let u = unpack_point_cloud(&cloud).unwrap();
         assert_eq!(u.points, vec![[1.0, 2.0, 3.0]]);
         assert_eq!(u.classes, None);
+    }
+
+    #[test]
+    fn unpack_errors_name_the_field() {
+        let mut cloud = PointCloudBuilder::new(&[[0.0; 3]]).build().unwrap();
+        cloud.point_stride = 5;
+        let err = unpack_point_cloud(&cloud).unwrap_err();
+        assert!(err.to_string().contains("point_cloud.data"), "{err}");
     }
 
     #[test]

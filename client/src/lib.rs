@@ -7,7 +7,38 @@
 //! [`FrameOutcome`] is a result, an error (with the decoded `BadRequest` field violations), or a
 //! skip. Frames are built from raw buffers with [`PointCloudBuilder`], [`camera_image`] and
 //! [`FrameBuilder`]. The wire types are the generated `landing_proto::v1` messages, re-exported as
-//! [`v1`].
+//! [`v1`], with accessors for the common reads of an answer ([`v1::FrameResult::best`],
+//! [`v1::LandingSite::shell`], [`v1::LandingSite::holes`], [`v1::LandingSite::center_xyz`],
+//! [`v1::LandingSite::lat_lon`]); scans and images are [`Bytes`], so a retried frame is not
+//! copied.
+//!
+//! A fused approach in three lines: connect, open a fused stream, read the answers (compiled, not
+//! run: it needs a running `landing-server`):
+//!
+//! ```no_run
+//! # async fn demo(frames: Vec<landing_client::v1::Frame>) -> Result<(), landing_client::ClientError> {
+//! use landing_client::{ClientConfig, LandingClient, StreamConfig};
+//!
+//! let client = LandingClient::connect(ClientConfig::new("http://127.0.0.1:50051")).await?;
+//! let mut answers = client.stream(tokio_stream::iter(frames), StreamConfig::fused());
+//! while let Some(item) = answers.next().await {
+//!     if let Some(best) = item?.outcome.result().and_then(|r| r.best()) {
+//!         println!("land at {:?}, {:.1} m clear", best.center_xyz(), best.safe_radius_m);
+//!     }
+//! }
+//! # Ok(()) }
+//! ```
+//!
+//! What can be checked without a server: a fused stream is one that carries fusion options, and
+//! no setting can ask for fusion that is not done.
+//!
+//! ```
+//! use landing_client::StreamConfig;
+//!
+//! assert!(StreamConfig::fused().fusion.is_some());
+//! assert!(StreamConfig::single_frame().fusion.is_none());
+//! assert!(StreamConfig::default().fusion.is_none());
+//! ```
 //!
 //! The crate is what a fleet back end adds to its build: tonic, prost, tokio and what they need.
 //! The `landing` command line (`landing-cli`), the evaluation (`landing-eval`) and the file
@@ -26,7 +57,7 @@
 //! # Ok::<(), landing_client::ClientError>(())
 //! ```
 //!
-//! Connecting needs a running server (`landing-server`); this example is compiled, not run:
+//! One frame at a time, and a stream fed from a task of its own (compiled, not run):
 //!
 //! ```no_run
 //! # async fn demo(frames: Vec<landing_client::v1::Frame>) -> Result<(), landing_client::ClientError> {
@@ -78,3 +109,4 @@ pub use landing_proto::v1;
 pub use outcome::{
     FieldViolation, FrameError, FrameOutcome, StreamItem, code_label, duration_from_proto,
 };
+pub use prost::bytes::Bytes;

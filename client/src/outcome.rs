@@ -180,13 +180,7 @@ impl std::fmt::Display for FrameError {
     }
 }
 
-/// Converts a protobuf duration to a std one; negative durations give `None`.
-pub fn duration_from_proto(d: prost_types::Duration) -> Option<Duration> {
-    if d.seconds < 0 || d.nanos < 0 {
-        return None;
-    }
-    Some(Duration::new(d.seconds as u64, d.nanos as u32))
-}
+pub use landing_proto::duration_from_proto;
 
 /// Turns one stream response into its sequence and outcome.
 pub(crate) fn outcome_of(response: StreamLandingSitesResponse) -> (u64, FrameOutcome) {

@@ -39,7 +39,8 @@ impl Mode {
         }
     }
 
-    /// The API's segmentation mode.
+    /// The API's segmentation mode (the one definition): `Truth` is CLASS_IMAGE sent with the
+    /// true label image, which is what sets it apart from a drone's own class image.
     pub fn segmentation_mode(self) -> landing_proto::v1::SegmentationMode {
         use landing_proto::v1::SegmentationMode as S;
         match self {
@@ -262,25 +263,10 @@ pub struct Summary {
     pub failures: Vec<FrameFailure>,
 }
 
-/// The human name of a `SemanticClass` id.
+/// The human name of a `SemanticClass` id, from the one class table
+/// ([`landing_geometry::SemanticClass`]); "unknown" for a number it does not have.
 pub fn class_name(class: u8) -> &'static str {
-    match class {
-        1 => "sky",
-        2 => "ground",
-        3 => "building wall",
-        4 => "building rooftop",
-        5 => "small rooftop entrance",
-        6 => "skylight",
-        7 => "air vents",
-        8 => "ac-unit",
-        9 => "seating",
-        10 => "air ducts",
-        11 => "water tower",
-        12 => "chimney",
-        13 => "tarp",
-        14 => "vegetation",
-        _ => "unknown",
-    }
+    landing_geometry::SemanticClass::from_u8(class).map_or("unknown", |c| c.name())
 }
 
 /// Aggregates records into a summary. Each mode gets a column of its single-frame answers and,

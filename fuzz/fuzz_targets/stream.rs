@@ -27,7 +27,7 @@ fuzz_target!(|data: &[u8]| {
     let pipeline = Pipeline::geometry_only(Params::default());
     let options = FrameOptions {
         params: Params::default(),
-        segmentation_mode: SegmentationMode::Auto,
+        segmentation_mode: SegmentationMode::Unspecified,
     };
     let mut time_ms: i64 = 1_000_000;
     // Frames are separated by 0xFE bytes.

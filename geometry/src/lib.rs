@@ -42,6 +42,7 @@ pub mod class;
 mod cloud;
 pub mod delaunay;
 pub mod filter;
+pub mod geodetic;
 mod mesh;
 pub mod polylabel;
 pub mod ranking;

@@ -3,7 +3,6 @@
 //! `foxglove.CameraCalibration`, the sensor poses as one `foxglove.FrameTransforms` from
 //! [`WORLD_FRAME`]. Both directions are exact: every number is copied, none is recomputed.
 
-use bytes::Bytes;
 use foxglove::messages as fox;
 use landing_proto::v1;
 
@@ -67,7 +66,7 @@ pub fn frame_to_foxglove(frame: &v1::Frame) -> Result<FoxgloveFrame, Error> {
                     r#type: f.r#type,
                 })
                 .collect(),
-            data: Bytes::copy_from_slice(&pc.data),
+            data: pc.data.clone(),
         }
     });
     let (image, calibration) = match &frame.image {
@@ -110,7 +109,7 @@ pub fn camera_to_foxglove(
         v1::camera_image::Image::Compressed(c) => Image::Compressed(fox::CompressedImage {
             timestamp,
             frame_id: frame_id.clone(),
-            data: Bytes::copy_from_slice(&c.data),
+            data: c.data.clone(),
             format: c.format.clone(),
         }),
         v1::camera_image::Image::Raw(r) => Image::Raw(fox::RawImage {
@@ -120,7 +119,7 @@ pub fn camera_to_foxglove(
             height: r.height,
             encoding: r.encoding.clone(),
             step: r.step,
-            data: Bytes::copy_from_slice(&r.data),
+            data: r.data.clone(),
         }),
     });
     let calibration = img.calibration.map(|c| fox::CameraCalibration {
@@ -158,7 +157,7 @@ pub fn frame_from_foxglove(parts: &FoxgloveFrame) -> Result<v1::Frame, String> {
                 r#type: f.r#type,
             })
             .collect(),
-        data: pc.data.to_vec(),
+        data: pc.data.clone(),
     });
     let image = match &parts.image {
         Some(image) => Some(camera_from_foxglove(
@@ -191,7 +190,7 @@ pub fn camera_from_foxglove(
             c.timestamp,
             &c.frame_id,
             v1::camera_image::Image::Compressed(v1::CompressedImage {
-                data: c.data.to_vec(),
+                data: c.data.clone(),
                 format: c.format.clone(),
             }),
         ),
@@ -203,7 +202,7 @@ pub fn camera_from_foxglove(
                 height: r.height,
                 encoding: r.encoding.clone(),
                 step: r.step,
-                data: r.data.to_vec(),
+                data: r.data.clone(),
             }),
         ),
     };
@@ -360,17 +359,11 @@ mod tests {
                 timestamp: Some(ts),
                 frame_id: "lidar".into(),
                 pose: Some(pose(1e6 + 0.125, 0.3)),
-                point_stride: 12,
-                fields: ["x", "y", "z"]
-                    .iter()
-                    .zip([0, 4, 8])
-                    .map(|(n, o)| v1::PackedElementField {
-                        name: (*n).into(),
-                        offset: o,
-                        r#type: v1::NumericType::Float32 as i32,
-                    })
-                    .collect(),
-                data: (0..24).collect(),
+                ..landing_proto::cloud::pack(
+                    &[[0.5, -1.0, 2.0], [3.0, 4.0, 5.0]],
+                    None,
+                    Some(&[4, 13]),
+                )
             }),
             image: Some(v1::CameraImage {
                 timestamp: Some(ts),
@@ -389,7 +382,7 @@ mod tests {
                     height: 1,
                     encoding: "rgb8".into(),
                     step: 6,
-                    data: vec![1, 2, 3, 4, 5, 6],
+                    data: vec![1, 2, 3, 4, 5, 6].into(),
                 })),
             }),
             geodetic_origin: Some(v1::GeodeticPoint {

@@ -264,7 +264,7 @@ mod round_trip {
                     offset: 0,
                     r#type: v1::NumericType::Float32 as i32,
                 }],
-                data,
+                data: data.into(),
             })
     }
 
@@ -294,11 +294,11 @@ mod round_trip {
                         height: 1,
                         encoding: "rgb8".into(),
                         step: 6,
-                        data,
+                        data: data.into(),
                     })
                 } else {
                     v1::camera_image::Image::Compressed(v1::CompressedImage {
-                        data,
+                        data: data.into(),
                         format: "png".into(),
                     })
                 }),

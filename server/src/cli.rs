@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::Context as _;
+use clap::builder::{PossibleValuesParser, TypedValueParser};
 use clap::{Args, Parser, Subcommand};
 use landing_geometry::Params;
 
@@ -75,8 +76,8 @@ pub struct DetectArgs {
     /// Where point classes come from: auto (model if an image and a model, else the cloud's
     /// classes, else none), model, class-image (the recording's true label image), point-classes
     /// or none.
-    #[arg(long, value_enum, default_value_t = ModeArg::Auto)]
-    pub segmentation: ModeArg,
+    #[arg(long, value_parser = segmentation_parser(), default_value = "auto")]
+    pub segmentation: SegmentationMode,
     /// ONNX segmentation model. Default for recordings: models/rooftop-segmentation.onnx when that
     /// file exists (always tried with --segmentation model).
     #[arg(long, value_name = "FILE.onnx")]
@@ -107,14 +108,14 @@ pub struct DetectArgs {
     pub json: bool,
 }
 
-/// `--segmentation` values.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ModeArg {
-    Auto,
-    Model,
-    ClassImage,
-    PointClasses,
-    None,
+/// `--segmentation`: the API's `SegmentationMode` by its command-line name (`auto` is
+/// UNSPECIFIED), the same names as `landing --segmentation`.
+fn segmentation_parser() -> impl TypedValueParser<Value = SegmentationMode> {
+    PossibleValuesParser::new(SegmentationMode::all().map(SegmentationMode::cli_name)).try_map(
+        |name: String| {
+            SegmentationMode::from_cli_name(&name).ok_or_else(|| format!("unknown mode `{name}`"))
+        },
+    )
 }
 
 impl DetectArgs {
@@ -135,16 +136,9 @@ impl DetectArgs {
             max_sites: self.max_sites.unwrap_or(d.max_sites),
             ..d
         };
-        let segmentation_mode = match self.segmentation {
-            ModeArg::Auto => SegmentationMode::Auto,
-            ModeArg::Model => SegmentationMode::Model,
-            ModeArg::ClassImage => SegmentationMode::ClassImage,
-            ModeArg::PointClasses => SegmentationMode::PointClasses,
-            ModeArg::None => SegmentationMode::None,
-        };
         FrameOptions {
             params,
-            segmentation_mode,
+            segmentation_mode: self.segmentation,
         }
     }
 
@@ -154,8 +148,10 @@ impl DetectArgs {
         let default_model = crate::config::SegmentationConfig::default().model_path;
         let model = match (&self.model, self.segmentation) {
             (Some(m), _) => Some(m.clone()),
-            (None, ModeArg::Model) => Some(default_model),
-            (None, ModeArg::Auto) if self.recording.is_some() && default_model.is_file() => {
+            (None, SegmentationMode::Model) => Some(default_model),
+            (None, SegmentationMode::Unspecified)
+                if self.recording.is_some() && default_model.is_file() =>
+            {
                 Some(default_model)
             }
             (None, _) => None,

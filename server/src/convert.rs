@@ -9,12 +9,12 @@ use landing_proto::v1;
 use nalgebra::Isometry3;
 
 use crate::config::FusionConfig;
-use crate::geodetic::Geodetic;
 use crate::pipeline::{
     CameraImage, Cloud, Frame, FrameOptions, FrameOutput, ImagePixels, Intrinsics,
     SegmentationMode, Site, StageTimings, StreamMap, pose,
 };
 use crate::{Error, FieldViolation};
+use landing_geometry::geodetic::Geodetic;
 
 /// Largest coordinate magnitude accepted, metres: beyond this a value is corrupt, not a city.
 pub const MAX_COORDINATE_M: f64 = 1.0e7;
@@ -194,18 +194,6 @@ fn pose_of(c: &mut Checker, field: &str, p: &v1::Pose) -> Option<Isometry3<f64>>
     }
 }
 
-/// The numeric types of packed fields, with their sizes.
-fn numeric_size(t: v1::NumericType) -> Option<usize> {
-    use v1::NumericType as N;
-    match t {
-        N::Unspecified => None,
-        N::Uint8 | N::Int8 => Some(1),
-        N::Uint16 | N::Int16 => Some(2),
-        N::Uint32 | N::Int32 | N::Float32 => Some(4),
-        N::Float64 => Some(8),
-    }
-}
-
 #[derive(Clone, Copy)]
 enum Coord {
     F32(usize),
@@ -339,7 +327,7 @@ fn packed_field(
         );
         return None;
     };
-    let Some(size) = numeric_size(ty) else {
+    let Some(size) = landing_proto::cloud::numeric_size(ty) else {
         c.bad(
             format!("{path}.type"),
             "must be set (NUMERIC_TYPE_UNSPECIFIED)",
@@ -680,7 +668,7 @@ pub fn options_from(
     let Some(o) = options else {
         return Ok(FrameOptions {
             params: defaults.clone(),
-            segmentation_mode: SegmentationMode::Auto,
+            segmentation_mode: SegmentationMode::Unspecified,
         });
     };
     let mut c = Checker::new("options");
@@ -800,37 +788,13 @@ fn landable_classes(c: &mut Checker, asked: &[i32]) -> Vec<u8> {
 
 fn segmentation_mode(c: &mut Checker, mode: i32) -> Option<SegmentationMode> {
     match v1::SegmentationMode::try_from(mode) {
-        Ok(m) => Some(SegmentationMode::from(m)),
+        Ok(m) => Some(m),
         Err(_) => {
             c.bad(
                 "segmentation_mode",
                 format!("{mode} is not a SegmentationMode"),
             );
             None
-        }
-    }
-}
-
-impl From<v1::SegmentationMode> for SegmentationMode {
-    fn from(m: v1::SegmentationMode) -> Self {
-        match m {
-            v1::SegmentationMode::Unspecified => Self::Auto,
-            v1::SegmentationMode::Model => Self::Model,
-            v1::SegmentationMode::PointClasses => Self::PointClasses,
-            v1::SegmentationMode::None => Self::None,
-            v1::SegmentationMode::ClassImage => Self::ClassImage,
-        }
-    }
-}
-
-impl From<SegmentationMode> for v1::SegmentationMode {
-    fn from(m: SegmentationMode) -> Self {
-        match m {
-            SegmentationMode::Auto => Self::Unspecified,
-            SegmentationMode::Model => Self::Model,
-            SegmentationMode::PointClasses => Self::PointClasses,
-            SegmentationMode::None => Self::None,
-            SegmentationMode::ClassImage => Self::ClassImage,
         }
     }
 }
@@ -874,7 +838,6 @@ pub fn default_fusion(p: &landing_fusion::FusionParams) -> v1::FusionOptions {
         max_jump_m: Some(p.max_jump_m),
         register_scans: Some(p.register_scans),
         max_pixel_footprint_m: Some(p.max_pixel_footprint_m),
-        ..Default::default()
     }
 }
 
@@ -966,7 +929,7 @@ impl From<&FrameOutput> for v1::FrameResult {
             sequence: o.sequence,
             frame_timestamp: o.timestamp,
             sites: o.sites.iter().map(v1::LandingSite::from).collect(),
-            segmentation_mode: v1::SegmentationMode::from(o.segmentation_mode) as i32,
+            segmentation_mode: o.segmentation_mode as i32,
             point_count: count(o.point_count),
             triangle_count: count(o.triangle_count),
             timings: Some(v1::StageTimings::from(&o.timings)),
@@ -999,39 +962,11 @@ pub fn packed_xyz(xyz: &[f32]) -> v1::PointCloud {
     packed_cloud(xyz, None)
 }
 
-/// A packed cloud of float32 x, y, z and, when given, a uint8 "class" per point (stride 13).
+/// A packed cloud of float32 x, y, z and, when given, a uint8 "class" per point (stride 13; a
+/// missing class is 0): [`landing_proto::cloud::pack`] from flat coordinates.
 pub fn packed_cloud(xyz: &[f32], classes: Option<&[u8]>) -> v1::PointCloud {
-    let field = |name: &str, offset: u32, ty: v1::NumericType| v1::PackedElementField {
-        name: name.into(),
-        offset,
-        r#type: ty as i32,
-    };
-    let mut fields = vec![
-        field("x", 0, v1::NumericType::Float32),
-        field("y", 4, v1::NumericType::Float32),
-        field("z", 8, v1::NumericType::Float32),
-    ];
-    let stride = if classes.is_some() { 13 } else { 12 };
-    if classes.is_some() {
-        fields.push(field("class", 12, v1::NumericType::Uint8));
-    }
-    let mut data = Vec::with_capacity(xyz.len() / 3 * stride);
-    for (i, p) in xyz.chunks_exact(3).enumerate() {
-        for v in p {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        if let Some(classes) = classes {
-            data.push(classes.get(i).copied().unwrap_or(0));
-        }
-    }
-    v1::PointCloud {
-        timestamp: None,
-        frame_id: String::new(),
-        pose: None,
-        point_stride: stride as u32,
-        fields,
-        data,
-    }
+    let points: Vec<[f32; 3]> = xyz.chunks_exact(3).map(|p| [p[0], p[1], p[2]]).collect();
+    landing_proto::cloud::pack(&points, None, classes)
 }
 
 #[cfg(test)]
@@ -1074,7 +1009,7 @@ mod tests {
         assert_eq!(f.cloud.points, vec![[0.0, 0.0, 1.0], [1.0, 0.0, 1.0]]);
         assert_eq!(f.cloud.classes, Some(vec![4, 4]));
         assert_eq!(o.params, Params::default());
-        assert_eq!(o.segmentation_mode, SegmentationMode::Auto);
+        assert_eq!(o.segmentation_mode, SegmentationMode::Unspecified);
     }
 
     #[test]
@@ -1102,7 +1037,7 @@ mod tests {
                     field("intensity", 24, v1::NumericType::Float32),
                     field("ring", 28, v1::NumericType::Uint32),
                 ],
-                data,
+                data: data.into(),
                 ..Default::default()
             }),
             ..Default::default()
@@ -1146,7 +1081,7 @@ mod tests {
         let mut pc = packed_xyz(&[0.0; 6]);
         let mut data = pc.data.to_vec();
         data.push(0);
-        pc.data = data;
+        pc.data = data.into();
         f.point_cloud = Some(pc);
         assert_eq!(bad_fields(f, None), vec!["frame.point_cloud.data"]);
     }
@@ -1246,7 +1181,7 @@ mod tests {
             height: 2,
             encoding: "bgr8".into(),
             step: 12,
-            data: vec![0; 10],
+            data: vec![0; 10].into(),
         };
         let mut f = good_frame();
         f.image = Some(image(k, v1::camera_image::Image::Raw(raw)));

@@ -79,37 +79,10 @@ pub fn detect_recording(
     run_pipeline(&Frame::try_from(&frame)?, options, pipeline)
 }
 
-/// The result as the JSON document of `detect --json`.
+/// The result as the JSON document of `detect --json`: the API's result in the one schema
+/// that `landing detect --json` prints too ([`landing_proto::json`]).
 pub fn to_json(out: &FrameOutput) -> serde_json::Value {
-    let sites: Vec<_> = out
-        .sites
-        .iter()
-        .map(|s| {
-            let mut site = json!({
-                "rank": s.rank,
-                "shell": s.shell,
-                "holes": s.holes,
-                "center": s.center,
-                "safe_radius_m": s.safe_radius_m,
-                "area_m2": s.area_m2,
-                "normal": s.normal,
-                "plane_height_m": s.plane_height_m,
-                "point_count": s.point_count,
-                "triangle_count": s.triangle_count,
-            });
-            if let Some(g) = s.center_geodetic {
-                site["center_geodetic"] = json!([g.latitude_deg, g.longitude_deg, g.altitude_m]);
-            }
-            site
-        })
-        .collect();
-    json!({
-        "sites": sites,
-        "segmentation_mode": mode_name(out.segmentation_mode),
-        "point_count": out.point_count,
-        "triangle_count": out.triangle_count,
-        "timings_us": timings_us(out),
-    })
+    landing_proto::json::frame_result(&landing_proto::v1::FrameResult::from(out))
 }
 
 /// The result as a readable table.
@@ -120,7 +93,7 @@ pub fn to_table(out: &FrameOutput) -> String {
         "{} points, {} triangles, classes: {}, {} site(s)",
         out.point_count,
         out.triangle_count,
-        mode_name(out.segmentation_mode),
+        landing_proto::json::mode_name(out.segmentation_mode as i32),
         out.sites.len()
     );
     if !out.sites.is_empty() {
@@ -167,15 +140,4 @@ fn timings_us(out: &FrameOutput) -> serde_json::Value {
 
 fn micros(d: Duration) -> u64 {
     u64::try_from(d.as_micros()).unwrap_or(u64::MAX)
-}
-
-/// Lower-case name of a mode, as printed.
-pub fn mode_name(mode: SegmentationMode) -> &'static str {
-    match mode {
-        SegmentationMode::Auto => "auto",
-        SegmentationMode::Model => "model",
-        SegmentationMode::ClassImage => "class_image",
-        SegmentationMode::PointClasses => "point_classes",
-        SegmentationMode::None => "none",
-    }
 }

@@ -6,24 +6,13 @@
 use landing_geometry::Params;
 use nalgebra::Isometry3;
 
-use crate::geodetic::Geodetic;
+use landing_geometry::geodetic::Geodetic;
 
-/// Where the point classes of a frame come from. `Auto` is the proto's UNSPECIFIED.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum SegmentationMode {
-    /// The frame's class image if it has one, else the model if the frame has an image and the
-    /// server a model, else the cloud's classes if it has them, else none.
-    #[default]
-    Auto,
-    /// Segment the image with the server's model.
-    Model,
-    /// Use the frame's class image (for example the drone's own segmentation, or ground truth).
-    ClassImage,
-    /// Use the cloud's "class" field.
-    PointClasses,
-    /// Geometry only.
-    None,
-}
+/// Where the point classes of a frame come from: the API's enum, the one definition.
+/// `Unspecified` is "auto": the frame's class image if it has one, else the model if the frame
+/// has an image and the server a model, else the cloud's classes if it has them, else none
+/// (`Pipeline::resolve_mode` decides it).
+pub use landing_proto::v1::SegmentationMode;
 
 /// A validated LiDAR scan: points in the LiDAR frame and the pose `T_world_lidar`.
 #[derive(Debug, Clone, PartialEq)]

@@ -79,7 +79,6 @@ pub mod convert;
 pub mod detect;
 mod error;
 pub mod frame;
-pub mod geodetic;
 mod limit;
 mod live;
 pub mod pipeline;

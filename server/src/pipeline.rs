@@ -17,8 +17,8 @@ use crate::Error;
 pub use crate::frame::{
     CameraImage, Cloud, Frame, FrameOptions, ImagePixels, Intrinsics, SegmentationMode,
 };
-use crate::geodetic::{Geodetic, enu_to_geodetic};
 use crate::segmentation::{self, Judged, PointView, Segmenter};
+use landing_geometry::geodetic::{Geodetic, enu_to_geodetic};
 
 mod evidence;
 mod fused;
@@ -155,7 +155,7 @@ impl Pipeline {
         requested: SegmentationMode,
     ) -> Result<SegmentationMode, Error> {
         match requested {
-            SegmentationMode::Auto => Ok(if frame.class_image.is_some() {
+            SegmentationMode::Unspecified => Ok(if frame.class_image.is_some() {
                 SegmentationMode::ClassImage
             } else if frame.image.is_some() && self.segmenter.is_some() {
                 SegmentationMode::Model
@@ -355,7 +355,7 @@ fn classify(
             Some(out.classes)
         }
         SegmentationMode::PointClasses => frame.cloud.classes.clone(),
-        SegmentationMode::None | SegmentationMode::Auto => None,
+        SegmentationMode::None | SegmentationMode::Unspecified => None,
     };
     Ok(Classified {
         points,
@@ -566,12 +566,12 @@ mod tests {
         let p = Pipeline::default();
         let with_classes = frame(vec![], Some(vec![]));
         assert_eq!(
-            p.resolve_mode(&with_classes, SegmentationMode::Auto),
+            p.resolve_mode(&with_classes, SegmentationMode::Unspecified),
             Ok(SegmentationMode::PointClasses)
         );
         let bare = frame(vec![], None);
         assert_eq!(
-            p.resolve_mode(&bare, SegmentationMode::Auto),
+            p.resolve_mode(&bare, SegmentationMode::Unspecified),
             Ok(SegmentationMode::None)
         );
         let e = p
@@ -604,7 +604,7 @@ mod tests {
             },
         });
         assert_eq!(
-            p.resolve_mode(&with_class_image, SegmentationMode::Auto),
+            p.resolve_mode(&with_class_image, SegmentationMode::Unspecified),
             Ok(SegmentationMode::ClassImage)
         );
     }

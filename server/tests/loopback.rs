@@ -129,7 +129,7 @@ async fn stream_with_a_bad_frame_in_the_middle_goes_on() {
         .unwrap();
     let mut data = bad.data.to_vec();
     data[0..4].copy_from_slice(&f32::NAN.to_le_bytes());
-    bad.data = data;
+    bad.data = data.into();
 
     let responses = stream_all(&channel, requests).await;
     let sequences: Vec<u64> = responses.iter().map(|r| r.sequence).collect();
@@ -298,7 +298,7 @@ async fn frames_larger_than_four_mebibytes_are_accepted() {
                 .chain(std::iter::repeat_n(0u8, 4096 - stride))
         })
         .collect();
-    pc.data = padded;
+    pc.data = padded.into();
     pc.point_stride = 4096;
     assert!(f.encoded_len() > 4 << 20);
     let result = client(&channel)

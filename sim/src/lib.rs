@@ -26,12 +26,18 @@
 //! landing-sim ply     --seed 1 --out samples/roof.ply
 //! landing-sim scenarios --seed 2026 --out DIR            # 4 frames per approach, 40 m to 10 m
 //! landing-sim scenarios --seed 9100 --rate-hz 10 --duration-s 4 --pose-noise realistic --out DIR
+//! landing-sim scenarios --seed 2026 --revisits 2 --out DIR  # 3 visits an hour apart, visits.json
+//! landing-sim footprints --seed 2026 --worlds 6 --out footprints.geojson
 //! ```
 //!
-//! `scenarios` writes the `landing eval` set: one approach per building, `--frames` frames
-//! (default 4) at 10 Hz, or with `--rate-hz R` round(D·R)+1 frames at R Hz over the same
-//! descent lasting `--duration-s D` (default 4 s); `--pose-noise realistic` makes the frames
-//! carry an RTK-GNSS/INS pose error ([`noise::PoseNoise::REALISTIC`]).
+//! `scenarios` writes the `landing eval` set ([`scenarios`]): one approach per building,
+//! `--frames` frames (default 4) at 10 Hz, or with `--rate-hz R` round(D·R)+1 frames at R Hz
+//! over the same descent lasting `--duration-s D` (default 4 s); `--pose-noise realistic` makes
+//! the frames carry an RTK-GNSS/INS pose error ([`noise::PoseNoise::REALISTIC`]). With
+//! `--revisits N` every approach is flown N more times over roofs changed in between
+//! ([`revisit`]), every frame carries its world's WGS-84 origin on Manhattan ([`geodetic`]),
+//! and the set gets `visits.json` and its worlds' building footprints as GeoJSON
+//! ([`footprints`]); `--origin manhattan` adds the origin to a set without revisits.
 //!
 //! Reading a recording from another crate:
 //!
@@ -64,10 +70,14 @@ pub mod assets;
 pub mod camera;
 pub mod dataset;
 pub mod flight;
+pub mod footprints;
+pub mod geodetic;
 pub mod lidar;
 pub mod math;
 pub mod noise;
 pub mod recording;
+pub mod revisit;
+pub mod scenarios;
 pub mod scene;
 pub mod truth;
 pub mod world;
@@ -75,7 +85,7 @@ pub mod world;
 use std::path::Path;
 
 pub use assets::{AssetDistribution, AssetKind};
-pub use world::{Asset, Building, World, WorldConfig};
+pub use world::{Asset, AssetSource, Building, World, WorldConfig};
 
 /// Everything that can go wrong in this crate.
 #[derive(Debug, thiserror::Error)]

@@ -9,12 +9,16 @@ use landing_recording::scene::class_color;
 use landing_sim::camera::{CameraConfig, Intrinsics, render};
 use landing_sim::dataset::{DatasetConfig, Split, write_dataset};
 use landing_sim::flight::{FlightConfig, ViewConfig, lidar_pose, random_view, view_of};
+use landing_sim::footprints::write_footprints;
+use landing_sim::geodetic::scenario_origin;
 use landing_sim::lidar::{LidarConfig, scan};
 use landing_sim::noise::PoseNoise;
 use landing_sim::recording::{
     RecordConfig, busiest_roof, write_ply as write_recording_ply, write_recording,
 };
-use landing_sim::{AssetDistribution, AssetKind, World, WorldConfig};
+use landing_sim::revisit::ChangeRates;
+use landing_sim::scenarios::{MANIFEST, Origin, Revisits, ScenarioConfig, write_scenarios};
+use landing_sim::{AssetDistribution, World, WorldConfig};
 use rand::SeedableRng;
 
 #[derive(Parser)]
@@ -138,26 +142,115 @@ impl ApproachArgs {
     }
 }
 
-/// The recording of one scenario: building `building` of world `world_seed`.
-fn scenario_config(
-    world_seed: u64,
-    building: usize,
-    approach: &ApproachArgs,
-    width: u32,
-    height: u32,
-    lidar: LidarConfig,
-) -> anyhow::Result<RecordConfig> {
-    Ok(RecordConfig {
-        seed: world_seed,
-        flight: approach.flight()?,
-        width,
-        height,
-        lidar,
-        building: Some(building),
-        drone_id: format!("w{world_seed}-b{building}"),
-        pose_noise: approach.pose_noise(),
-        ..Default::default()
-    })
+/// Where the scenario worlds lie on the Earth.
+#[derive(Clone, Copy, Debug, PartialEq, clap::ValueEnum)]
+enum OriginArg {
+    /// Nowhere: the frames carry no geodetic origin.
+    None,
+    /// On Manhattan's blocks around Midtown (40.75 N, 73.98 W), each world of a set in its own
+    /// 500 m cell (seed mod 60 of a 3 × 20 grid along the avenues); writes footprints.geojson.
+    Manhattan,
+}
+
+/// `--change-rates add=P,remove=P,moved=P,tarp=P` (keys left out keep their defaults).
+fn parse_change_rates(text: &str) -> Result<ChangeRates, String> {
+    let mut rates = ChangeRates::default();
+    for part in text.split(',').filter(|p| !p.trim().is_empty()) {
+        let (key, value) = part
+            .split_once('=')
+            .ok_or_else(|| format!("`{part}`: expected KEY=PROBABILITY"))?;
+        let p: f64 = value
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{value}` is not a number"))?;
+        if !(0.0..=1.0).contains(&p) {
+            return Err(format!("{key}={value}: a rate is a probability in 0..=1"));
+        }
+        match key.trim() {
+            "add" => rates.add = p,
+            "remove" => rates.remove = p,
+            "moved" => rates.moved = p,
+            "tarp" => rates.tarp = p,
+            other => {
+                return Err(format!(
+                    "unknown change `{other}` (add, remove, moved, tarp)"
+                ));
+            }
+        }
+    }
+    Ok(rates)
+}
+
+/// Flying every approach of a scenario set again over changed roofs.
+#[derive(clap::Args)]
+struct RevisitArgs {
+    /// Fly every approach N more times, --revisit-interval-s apart, with the roofs changed
+    /// before each visit; files become vKK-w<seed>-b<building>.mcap, listed in time order in
+    /// visits.json with what changed on which roof. Per roof and visit (--change-rates): a new
+    /// AC unit, seating or planter 0.2, one loose asset (vents, AC, seating, ducts, tarp,
+    /// planter) removed 0.2, one movable asset (AC, seating, tarp, planter) moved 0.5 (only
+    /// about one roof in four has one), a tarp laid down 0.15. Far more than a city changes in
+    /// an hour, on purpose: the default 36-roof set over 2 revisits sees every kind of change
+    /// on its target roofs (and hundreds on their neighbours), while about half the roofs stay
+    /// as they were at each visit, so what a catalog keeps is tested as much as what it
+    /// replaces. Seeded, per roof.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=i64::from(Revisits::MAX)))]
+    revisits: Option<u32>,
+    /// Seconds between visits (the frames' timestamps move by this much per visit).
+    #[arg(long, default_value_t = 3600.0, requires = "revisits")]
+    revisit_interval_s: f64,
+    /// Per-roof, per-visit change probabilities, e.g. add=0.2,remove=0.2,moved=0.5,tarp=0.15.
+    #[arg(long, value_parser = parse_change_rates, requires = "revisits")]
+    change_rates: Option<ChangeRates>,
+    /// Where the worlds lie: frames carry the WGS-84 origin (default: manhattan with
+    /// --revisits, none without, so that plain sets stay as they were).
+    #[arg(long, value_enum)]
+    origin: Option<OriginArg>,
+}
+
+impl RevisitArgs {
+    fn revisits(&self) -> Option<Revisits> {
+        self.revisits.map(|count| Revisits {
+            count,
+            interval_s: self.revisit_interval_s,
+            rates: self.change_rates.unwrap_or_default(),
+        })
+    }
+
+    fn origin(&self) -> Origin {
+        match self.origin {
+            Some(OriginArg::Manhattan) => Origin::Manhattan,
+            Some(OriginArg::None) => Origin::None,
+            None if self.revisits.is_some() => Origin::Manhattan,
+            None => Origin::None,
+        }
+    }
+}
+
+impl ScenariosArgs {
+    /// The set these arguments describe.
+    fn config(&self) -> anyhow::Result<ScenarioConfig> {
+        let record = RecordConfig {
+            flight: self.approach.flight()?,
+            width: self.width,
+            height: self.height,
+            lidar: self.lidar.config()?,
+            pose_noise: self.approach.pose_noise(),
+            ..Default::default()
+        };
+        let revisits = self.visits.revisits();
+        if let Some(r) = &revisits {
+            r.validate().context("--revisits")?;
+        }
+        Ok(ScenarioConfig {
+            seed: self.seed,
+            worlds: self.worlds,
+            buildings: self.buildings,
+            record,
+            origin: self.visits.origin(),
+            revisits,
+        })
+    }
 }
 
 #[derive(Subcommand)]
@@ -177,6 +270,10 @@ enum Command {
     /// 41 frames at 10 Hz). --pose-noise realistic makes the frames carry an RTK GNSS + INS pose
     /// error; the ground truth and the scans keep the true poses.
     Scenarios(ScenariosArgs),
+    /// Write the building footprints of scenario worlds (seeds seed, seed+1, ...) with roof
+    /// heights as a GeoJSON FeatureCollection in WGS-84, each world on Manhattan as `scenarios`
+    /// places it: the candidate roofs a city's open-data portal would publish.
+    Footprints(FootprintsArgs),
     /// Render one view (image and colourised labels side by side) to a PNG.
     Preview(PreviewArgs),
 }
@@ -274,6 +371,20 @@ struct ScenariosArgs {
     height: u32,
     #[command(flatten)]
     lidar: LidarArgs,
+    #[command(flatten)]
+    visits: RevisitArgs,
+}
+
+#[derive(clap::Args)]
+struct FootprintsArgs {
+    #[arg(long, default_value_t = 2026)]
+    seed: u64,
+    /// Worlds, of seeds seed, seed+1, ...
+    #[arg(long, default_value_t = 6)]
+    worlds: u64,
+    /// The GeoJSON file to write.
+    #[arg(long)]
+    out: PathBuf,
 }
 
 #[derive(clap::Args)]
@@ -298,6 +409,7 @@ fn main() -> anyhow::Result<()> {
         Command::Record(args) => record_cmd(args),
         Command::Ply(args) => ply_cmd(args),
         Command::Scenarios(args) => scenarios_cmd(args),
+        Command::Footprints(args) => footprints_cmd(args),
         Command::Preview(args) => preview_cmd(args),
     }
 }
@@ -402,61 +514,52 @@ fn ply_cmd(args: PlyArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// `landing-sim scenarios`: the `landing eval` scenario set, one MCAP per approached building.
+/// `landing-sim scenarios`: the `landing eval` scenario set, one MCAP per approached building
+/// (and visit).
 fn scenarios_cmd(args: ScenariosArgs) -> anyhow::Result<()> {
-    let lidar = args.lidar.config()?;
-    args.approach.flight()?;
+    let config = args.config()?;
     let out = &args.out;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let start = Instant::now();
-    let (mut files, mut total) = (0usize, 0usize);
-    for world_seed in args.seed..args.seed + args.worlds {
-        let world = World::generate(world_seed, &WorldConfig::default())?;
-        for &b in scenario_buildings(&world, world_seed)
-            .iter()
-            .take(args.buildings)
-        {
-            let config = scenario_config(
-                world_seed,
-                b,
-                &args.approach,
-                args.width,
-                args.height,
-                lidar,
-            )?;
-            let path = out.join(format!("w{world_seed}-b{b:03}.mcap"));
-            total += write_recording(&config, &path)
-                .with_context(|| format!("writing {}", path.display()))?;
-            files += 1;
-        }
-    }
+    let set =
+        write_scenarios(&config, out).with_context(|| format!("writing {}", out.display()))?;
+    let visits = match config.revisits {
+        Some(r) => format!(
+            " ({} visits, {} roof changes; {MANIFEST})",
+            r.count + 1,
+            set.changes
+        ),
+        None => String::new(),
+    };
     println!(
-        "wrote {total} frames of {files} approaches to {} in {:.1} s",
+        "wrote {} frames of {} approaches to {}{visits} in {:.1} s",
+        set.frames,
+        set.files,
         out.display(),
         start.elapsed().as_secs_f64()
     );
     Ok(())
 }
 
-/// The buildings of `world` in the order the scenario set takes them: hard cases first (tarps,
-/// water towers on legs), then a seeded order.
-fn scenario_buildings(world: &World, world_seed: u64) -> Vec<usize> {
-    let has = |b: usize, kind: AssetKind| {
-        world.buildings[b]
-            .assets
-            .iter()
-            .any(|&a| world.assets[a].kind == kind)
-    };
-    let mut order: Vec<usize> = (0..world.buildings.len()).collect();
-    order.sort_by_key(|&b| {
-        let mix = (b as u64 ^ world_seed).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        (
-            !has(b, AssetKind::Tarp),
-            !has(b, AssetKind::WaterTower),
-            mix,
-        )
-    });
-    order
+/// `landing-sim footprints`: the scenario worlds' building footprints as GeoJSON.
+fn footprints_cmd(args: FootprintsArgs) -> anyhow::Result<()> {
+    let worlds = (args.seed..args.seed + args.worlds)
+        .map(|seed| {
+            Ok((
+                World::generate(seed, &WorldConfig::default())?,
+                scenario_origin(seed),
+            ))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let placed: Vec<(&World, _)> = worlds.iter().map(|(w, g)| (w, *g)).collect();
+    write_footprints(&placed, &args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let n: usize = worlds.iter().map(|(w, _)| w.buildings.len()).sum();
+    println!(
+        "wrote {n} building footprints of {} worlds to {}",
+        worlds.len(),
+        args.out.display()
+    );
+    Ok(())
 }
 
 /// `landing-sim preview`: one rendered view beside its colourised labels.
@@ -504,14 +607,18 @@ fn preview_cmd(args: PreviewArgs) -> anyhow::Result<()> {
 mod tests {
     use super::*;
 
-    fn scenarios(extra: &[&str]) -> Result<LidarArgs, clap::Error> {
+    fn scenarios_args(extra: &[&str]) -> Result<ScenariosArgs, clap::Error> {
         let args = ["landing-sim", "scenarios", "--out", "x"]
             .iter()
             .chain(extra);
         match Cli::try_parse_from(args)?.command {
-            Command::Scenarios(args) => Ok(args.lidar),
+            Command::Scenarios(args) => Ok(args),
             _ => unreachable!("parsed another subcommand"),
         }
+    }
+
+    fn scenarios(extra: &[&str]) -> Result<LidarArgs, clap::Error> {
+        Ok(scenarios_args(extra)?.lidar)
     }
 
     fn approach(extra: &[&str]) -> Result<ApproachArgs, clap::Error> {
@@ -531,9 +638,12 @@ mod tests {
         b: usize,
         size: (u32, u32),
     ) -> Vec<landing_proto::v1::Frame> {
-        let a = approach(extra).unwrap();
-        let config = scenario_config(world, b, &a, size.0, size.1, LidarConfig::default());
-        let config = config.unwrap();
+        let mut args = vec!["--width".to_string(), size.0.to_string()];
+        args.extend(["--height".to_string(), size.1.to_string()]);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let set = scenarios_args(&args).unwrap().config().unwrap();
+        let config = set.record_config(world, b, landing_sim::recording::Visit::FIRST);
         let (w, frames) = landing_sim::recording::simulate(&config).unwrap();
         frames
             .iter()
@@ -677,6 +787,64 @@ mod tests {
         let (got, want) = (poses(&noisy[0]), BEFORE_FIRST);
         let d = ((got[0] - want[0]).powi(2) + (got[1] - want[1]).powi(2)).sqrt();
         assert!(d > 1e-4 && d < 0.2, "{d}");
+    }
+
+    #[test]
+    fn revisit_flags_set_the_visits_the_rates_and_the_origin() {
+        let plain = scenarios_args(&[]).unwrap().config().unwrap();
+        assert_eq!((plain.revisits, plain.origin), (None, Origin::None));
+        let placed = scenarios_args(&["--origin", "manhattan"]).unwrap();
+        assert_eq!(placed.config().unwrap().origin, Origin::Manhattan);
+
+        let set = scenarios_args(&["--revisits", "3"])
+            .unwrap()
+            .config()
+            .unwrap();
+        let want = Revisits {
+            count: 3,
+            interval_s: 3600.0,
+            rates: ChangeRates::default(),
+        };
+        assert_eq!((set.revisits, set.origin), (Some(want), Origin::Manhattan));
+        let flags = [
+            "--revisits",
+            "1",
+            "--revisit-interval-s",
+            "60",
+            "--change-rates",
+            "tarp=1,moved=0",
+            "--origin",
+            "none",
+        ];
+        let set = scenarios_args(&flags).unwrap().config().unwrap();
+        let r = set.revisits.unwrap();
+        assert_eq!(
+            (r.interval_s, r.rates.tarp, r.rates.moved),
+            (60.0, 1.0, 0.0)
+        );
+        assert_eq!(
+            (r.rates.add, set.origin),
+            (ChangeRates::default().add, Origin::None)
+        );
+
+        for (flags, name) in [
+            (vec!["--revisit-interval-s", "60"], "--revisits"),
+            (vec!["--revisits", "100"], "--revisits"),
+            (
+                vec!["--revisits", "1", "--change-rates", "tarp=2"],
+                "probability",
+            ),
+            (
+                vec!["--revisits", "1", "--change-rates", "paint=0.1"],
+                "paint",
+            ),
+        ] {
+            let err = scenarios_args(&flags).err().unwrap().to_string();
+            assert!(err.contains(name), "{err}");
+        }
+        let bad = scenarios_args(&["--revisits", "1", "--revisit-interval-s", "0"]).unwrap();
+        let err = format!("{:#}", bad.config().unwrap_err());
+        assert!(err.contains("revisit_interval_s"), "{err}");
     }
 
     #[test]

@@ -23,13 +23,11 @@ use crate::SimError;
 use crate::camera::{CameraConfig, Intrinsics, Rendered, render};
 use crate::dataset::{encode_label_png, encode_rgb_png};
 use crate::flight::{FlightConfig, View, approach, lidar_pose};
+use crate::geodetic::Geodetic;
 use crate::lidar::{LidarConfig, LidarPoint, scan};
 use crate::noise::{PoseNoise, body_errors};
 use crate::truth::{RoofTruth, TruthConfig, ground_truth};
 use crate::world::{World, WorldConfig};
-
-/// Bytes per packed point: x, y, z, intensity (FLOAT32) and class (UINT8).
-pub const POINT_STRIDE: u32 = 17;
 
 /// Start time of every recording (2026-01-01T00:00:00Z), so that files are reproducible.
 pub const START_UNIX_S: i64 = 1_767_225_600;
@@ -50,6 +48,60 @@ pub struct RecordConfig {
     pub drone_id: String,
     /// Error of the poses the frames carry (default: none, the true poses).
     pub pose_noise: PoseNoise,
+    /// WGS-84 position of the world origin that every frame carries (default: none).
+    pub geodetic_origin: Option<Geodetic>,
+    /// Which visit of the roof this flight is (default: the first).
+    pub visit: Visit,
+}
+
+/// One visit of a roof: the first flies today's approach at [`START_UNIX_S`]; a later one starts
+/// `start_offset_s` later and draws its own heading, aim, pose error and sensor noise, as another
+/// drone's approach would. The light stays (the world's sun is part of the world).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Visit {
+    /// 0 for the first visit.
+    pub index: u32,
+    /// Seconds from [`START_UNIX_S`] to the visit's first frame.
+    pub start_offset_s: f64,
+}
+
+impl Visit {
+    /// The first visit: today's recordings.
+    pub const FIRST: Visit = Visit {
+        index: 0,
+        start_offset_s: 0.0,
+    };
+
+    /// Visit `index` of visits `interval_s` apart.
+    pub fn nth(index: u32, interval_s: f64) -> Visit {
+        Visit {
+            index,
+            start_offset_s: f64::from(index) * interval_s,
+        }
+    }
+
+    /// The seed of this visit's random draws from a recording's seed (the seed itself on the
+    /// first visit, so that first visits are today's).
+    pub fn seed(self, seed: u64) -> u64 {
+        if self.index == 0 {
+            seed
+        } else {
+            seed ^ u64::from(self.index).wrapping_mul(0xd6e8_feb8_6659_fd93)
+        }
+    }
+
+    /// Checks the offset: finite, not negative, under 100 years.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let s = self.start_offset_s;
+        if !(s.is_finite() && (0.0..=3.2e9).contains(&s)) {
+            return Err(SimError::invalid(
+                "visit.start_offset_s",
+                s,
+                "must be in 0..=3.2e9 s",
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Default for RecordConfig {
@@ -66,6 +118,8 @@ impl Default for RecordConfig {
             building: None,
             drone_id: "sim-1".to_string(),
             pose_noise: PoseNoise::NONE,
+            geodetic_origin: None,
+            visit: Visit::FIRST,
         }
     }
 }
@@ -97,7 +151,16 @@ pub fn busiest_roof(world: &World) -> usize {
 
 /// Simulates the frames of a flight (camera, LiDAR and ground truth), without encoding them.
 pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimError> {
+    let world = World::generate(config.seed, &config.world)?;
+    let frames = simulate_in(&world, config)?;
+    Ok((world, frames))
+}
+
+/// Simulates the frames of a flight over `world` (the world of `config.seed` as it is at
+/// `config.visit`, for example from [`crate::revisit::revise`]).
+pub fn simulate_in(world: &World, config: &RecordConfig) -> Result<Vec<SimFrame>, SimError> {
     config.pose_noise.validate()?;
+    config.visit.validate()?;
     if !(config.flight.rate_hz.is_finite() && config.flight.rate_hz > 0.0) {
         return Err(SimError::invalid(
             "flight.rate_hz",
@@ -105,7 +168,6 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
             "must be positive",
         ));
     }
-    let world = World::generate(config.seed, &config.world)?;
     if world.buildings.is_empty() {
         return Err(SimError::invalid(
             "world",
@@ -113,7 +175,7 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
             "the city has no building to approach",
         ));
     }
-    let building = config.building.unwrap_or_else(|| busiest_roof(&world));
+    let building = config.building.unwrap_or_else(|| busiest_roof(world));
     if building >= world.buildings.len() {
         return Err(SimError::invalid(
             "building",
@@ -122,11 +184,12 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
         ));
     }
     let intrinsics = Intrinsics::from_hfov(config.width, config.height, config.camera.hfov_deg)?;
-    let mut rng = SmallRng::seed_from_u64(config.seed ^ 0x666c_6967_6874);
-    let views = approach(&world, building, &config.flight, &mut rng);
+    let seed = config.visit.seed(config.seed);
+    let mut rng = SmallRng::seed_from_u64(seed ^ 0x666c_6967_6874);
+    let views = approach(world, building, &config.flight, &mut rng);
     // Its own stream per approach (buildings of one world share the world's seed), so the
     // pose error changes none of the draws above.
-    let noise_seed = (config.seed ^ 0x706f_7365_6e6f_6973)
+    let noise_seed = (seed ^ 0x706f_7365_6e6f_6973)
         .wrapping_add((building as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
     let errors = body_errors(
         &config.pose_noise,
@@ -136,7 +199,7 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
     );
     let mut frames = Vec::with_capacity(views.len());
     for (i, (view, error)) in views.into_iter().zip(errors).enumerate() {
-        let frame_seed = config.seed.wrapping_mul(1_000_003).wrapping_add(i as u64);
+        let frame_seed = seed.wrapping_mul(1_000_003).wrapping_add(i as u64);
         let lp = lidar_pose(&view.camera);
         // The drone body's origin is the camera's; the LiDAR is bolted 5 cm above it.
         let (carried_camera_pose, carried_lidar_pose) = if config.pose_noise.is_none() {
@@ -148,15 +211,9 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
                 error.apply(&origin, &lp),
             )
         };
-        let image = render(
-            &world,
-            &intrinsics,
-            &view.camera,
-            &config.camera,
-            frame_seed,
-        );
-        let points = scan(&world, &lp, &config.lidar, frame_seed)?;
-        let roofs = ground_truth(&world, &points, building, &config.truth)?;
+        let image = render(world, &intrinsics, &view.camera, &config.camera, frame_seed);
+        let points = scan(world, &lp, &config.lidar, frame_seed)?;
+        let roofs = ground_truth(world, &points, building, &config.truth)?;
         frames.push(SimFrame {
             sequence: i as u64,
             view,
@@ -169,7 +226,7 @@ pub fn simulate(config: &RecordConfig) -> Result<(World, Vec<SimFrame>), SimErro
             roofs,
         });
     }
-    Ok((world, frames))
+    Ok(frames)
 }
 
 /// Protobuf pose of an isometry.
@@ -208,8 +265,14 @@ pub fn pose_from_proto(p: Option<&v1::Pose>) -> Isometry3<f64> {
     Isometry3::from_parts(nalgebra::Translation3::new(t.x, t.y, t.z), uq)
 }
 
-fn timestamp(sequence: u64, rate_hz: f64) -> prost_types::Timestamp {
-    let ns = (sequence as f64 / rate_hz * 1e9).round() as i64;
+/// The timestamp frame `sequence` of a recording of `config` carries.
+pub fn frame_time(config: &RecordConfig, sequence: u64) -> prost_types::Timestamp {
+    timestamp(sequence, config.flight.rate_hz, config.visit.start_offset_s)
+}
+
+/// The time of frame `sequence` at `rate_hz`, `offset_s` after [`START_UNIX_S`].
+fn timestamp(sequence: u64, rate_hz: f64, offset_s: f64) -> prost_types::Timestamp {
+    let ns = (sequence as f64 / rate_hz * 1e9).round() as i64 + (offset_s * 1e9).round() as i64;
     prost_types::Timestamp {
         seconds: START_UNIX_S + ns / 1_000_000_000,
         nanos: (ns % 1_000_000_000) as i32,
@@ -229,31 +292,22 @@ fn ring(points: &[[f64; 2]], z: f64) -> v1::LinearRing {
     }
 }
 
-/// Packs points (LiDAR frame) as x, y, z, intensity FLOAT32 + class UINT8, stride 17.
-pub fn pack_points(points: &[LidarPoint]) -> Vec<u8> {
-    let mut data = Vec::with_capacity(points.len() * POINT_STRIDE as usize);
-    for p in points {
-        for v in [p.local[0], p.local[1], p.local[2], p.intensity] {
-            data.extend_from_slice(&v.to_le_bytes());
-        }
-        data.push(p.class);
+/// The scan in the LiDAR frame, packed as the API's point clouds are (x, y, z, intensity float32
+/// and the true class byte: [`landing_proto::cloud::pack`]).
+fn lidar_cloud(
+    ts: prost_types::Timestamp,
+    pose: v1::Pose,
+    points: &[LidarPoint],
+) -> v1::PointCloud {
+    let xyz: Vec<[f32; 3]> = points.iter().map(|p| p.local).collect();
+    let intensities: Vec<f32> = points.iter().map(|p| p.intensity).collect();
+    let classes: Vec<u8> = points.iter().map(|p| p.class).collect();
+    v1::PointCloud {
+        timestamp: Some(ts),
+        frame_id: "lidar".to_string(),
+        pose: Some(pose),
+        ..landing_proto::cloud::pack(&xyz, Some(&intensities), Some(&classes))
     }
-    data
-}
-
-fn fields() -> Vec<v1::PackedElementField> {
-    let f = |name: &str, offset: u32, t: v1::NumericType| v1::PackedElementField {
-        name: name.to_string(),
-        offset,
-        r#type: t as i32,
-    };
-    vec![
-        f("x", 0, v1::NumericType::Float32),
-        f("y", 4, v1::NumericType::Float32),
-        f("z", 8, v1::NumericType::Float32),
-        f("intensity", 12, v1::NumericType::Float32),
-        f("class", 16, v1::NumericType::Uint8),
-    ]
 }
 
 fn calibration(i: &Intrinsics) -> v1::CameraCalibration {
@@ -275,23 +329,16 @@ pub fn frame_messages(
     f: &SimFrame,
     config: &RecordConfig,
 ) -> Result<(v1::Frame, v1::GroundTruth, v1::CameraImage), SimError> {
-    let ts = timestamp(f.sequence, config.flight.rate_hz);
+    let ts = frame_time(config, f.sequence);
     let cam_pose = pose_to_proto(&f.carried_camera_pose);
     let lidar_pose = pose_to_proto(&f.carried_lidar_pose);
     let frame = v1::Frame {
         drone_id: config.drone_id.clone(),
         sequence: f.sequence,
         timestamp: Some(ts),
-        point_cloud: Some(v1::PointCloud {
-            timestamp: Some(ts),
-            frame_id: "lidar".to_string(),
-            pose: Some(lidar_pose),
-            point_stride: POINT_STRIDE,
-            fields: fields(),
-            data: pack_points(&f.points),
-        }),
+        point_cloud: Some(lidar_cloud(ts, lidar_pose, &f.points)),
         image: Some(camera_png(ts, cam_pose, f, encode_rgb_png(&f.image)?)),
-        geodetic_origin: None,
+        geodetic_origin: config.geodetic_origin.map(crate::geodetic::geodetic_point),
         // The true labels travel on their own topic, so that a replay is segmented by the server.
         class_image: None,
     };
@@ -321,7 +368,7 @@ fn camera_png(
         pose: Some(pose),
         calibration: Some(calibration(&f.intrinsics)),
         image: Some(v1::camera_image::Image::Compressed(v1::CompressedImage {
-            data: png,
+            data: png.into(),
             format: "png".to_string(),
         })),
     }

@@ -94,6 +94,58 @@ pub struct Prim {
     pub asset: u32,
 }
 
+/// A rigid motion in the ground plane: a turn by `yaw` radians about the vertical through
+/// `pivot`, then a shift (x, y), metres. Moves a rooftop asset's primitives as one body.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarMotion {
+    pub pivot: [f64; 2],
+    pub yaw: f64,
+    pub shift: [f64; 2],
+}
+
+impl PlanarMotion {
+    /// Where the motion takes the point (x, y).
+    pub fn apply(&self, x: f32, y: f32) -> (f32, f32) {
+        let (s, c) = self.yaw.sin_cos();
+        let (dx, dy) = (f64::from(x) - self.pivot[0], f64::from(y) - self.pivot[1]);
+        (
+            (self.pivot[0] + c * dx - s * dy + self.shift[0]) as f32,
+            (self.pivot[1] + s * dx + c * dy + self.shift[1]) as f32,
+        )
+    }
+
+    /// The shape moved: centres and axes turn and shift, sizes and heights stay.
+    pub fn shape(&self, shape: Shape) -> Shape {
+        match shape {
+            Shape::Box { c, h, cos, sin } => {
+                let (x, y) = self.apply(c.x, c.y);
+                let yaw = f64::from(sin).atan2(f64::from(cos)) + self.yaw;
+                Shape::Box {
+                    c: V3::new(x, y, c.z),
+                    h,
+                    cos: yaw.cos() as f32,
+                    sin: yaw.sin() as f32,
+                }
+            }
+            Shape::Cylinder { cx, cy, r, z0, z1 } => {
+                let (cx, cy) = self.apply(cx, cy);
+                Shape::Cylinder { cx, cy, r, z0, z1 }
+            }
+            Shape::Cone { cx, cy, r, z0, z1 } => {
+                let (cx, cy) = self.apply(cx, cy);
+                Shape::Cone { cx, cy, r, z0, z1 }
+            }
+            Shape::Sphere { c, r } => {
+                let (x, y) = self.apply(c.x, c.y);
+                Shape::Sphere {
+                    c: V3::new(x, y, c.z),
+                    r,
+                }
+            }
+        }
+    }
+}
+
 impl Prim {
     /// The class of the surface with outward normal `n`.
     pub fn class_for_normal(&self, n: V3) -> u8 {

@@ -9,7 +9,7 @@ use rand::{Rng, SeedableRng};
 use crate::SimError;
 use crate::assets::{AssetDistribution, AssetKind, sample_counts};
 use crate::math::V3;
-use crate::scene::{Bvh, Material, NO_PRIM, Prim, Shape, Texture};
+use crate::scene::{Bvh, Material, NO_PRIM, PlanarMotion, Prim, Shape, Texture};
 
 /// Parameters of a city. `Default` is a 4×4-block Manhattan-like city.
 #[derive(Debug, Clone, PartialEq)]
@@ -272,6 +272,82 @@ impl World {
     pub fn block_period_m(&self) -> f64 {
         self.config.block_size_m + self.config.street_width_m
     }
+
+    /// The same city with its rooftop assets replaced by `assets`, in the order given (asset
+    /// `i` of the result is `assets[i]`; each building lists its own in that order). Buildings,
+    /// sun and ground stay. A [`AssetSource::Kept`] asset keeps the looks of the asset it was:
+    /// its primitives move rigidly from that asset's place and heading to its new ones; a
+    /// [`AssetSource::New`] one gets fresh primitives drawn from its seed.
+    pub fn with_assets(&self, assets: &[(Asset, AssetSource)]) -> Result<World, SimError> {
+        let mut kept: Vec<Vec<Prim>> = vec![Vec::new(); self.assets.len()];
+        let mut prims: Vec<Prim> = Vec::new();
+        for p in self.prims() {
+            match kept.get_mut(p.asset as usize) {
+                Some(own) => own.push(*p),
+                None => prims.push(*p),
+            }
+        }
+        let mut buildings = self.buildings.clone();
+        buildings.iter_mut().for_each(|b| b.assets.clear());
+        for (ai, (a, source)) in assets.iter().enumerate() {
+            let b = buildings.get_mut(a.building).ok_or_else(|| {
+                SimError::invalid(
+                    "assets.building",
+                    a.building,
+                    "is not a building of this world",
+                )
+            })?;
+            b.assets.push(ai);
+            let (bi, roof_z) = (a.building as u32, b.height_m);
+            match *source {
+                AssetSource::Kept(old) => {
+                    let was = self.assets.get(old).ok_or_else(|| {
+                        SimError::invalid("assets.source", old, "is not an asset of this world")
+                    })?;
+                    let motion = PlanarMotion {
+                        pivot: was.center,
+                        yaw: a.yaw - was.yaw,
+                        shift: [a.center[0] - was.center[0], a.center[1] - was.center[1]],
+                    };
+                    // An asset that stays keeps its primitives bit for bit.
+                    let stays = a.center == was.center && a.yaw == was.yaw;
+                    prims.extend(kept[old].iter().map(|p| Prim {
+                        shape: if stays {
+                            p.shape
+                        } else {
+                            motion.shape(p.shape)
+                        },
+                        building: bi,
+                        asset: ai as u32,
+                        ..*p
+                    }));
+                }
+                AssetSource::New(seed) => {
+                    let mut rng = SmallRng::seed_from_u64(seed);
+                    asset_prims(a, roof_z, bi, ai as u32, &mut rng, &mut prims);
+                }
+            }
+        }
+        Ok(World {
+            seed: self.seed,
+            config: self.config.clone(),
+            buildings,
+            assets: assets.iter().map(|(a, _)| a.clone()).collect(),
+            sun_dir: self.sun_dir,
+            ambient: self.ambient,
+            bvh: Bvh::build(prims),
+            dropped_assets: self.dropped_assets,
+        })
+    }
+}
+
+/// Where an asset of [`World::with_assets`] comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum AssetSource {
+    /// Asset `i` of the world being changed, perhaps moved.
+    Kept(usize),
+    /// A new asset whose looks are drawn from this seed.
+    New(u64),
 }
 
 /// The buildings of the street grid, block by block, each block split into lots; no assets yet.
@@ -538,7 +614,7 @@ fn footprint_rank(kind: AssetKind) -> u32 {
 }
 
 /// Footprint half extents and height of a fresh asset of `kind`.
-fn asset_size(kind: AssetKind, rng: &mut SmallRng) -> ([f64; 2], f64) {
+pub(crate) fn asset_size(kind: AssetKind, rng: &mut SmallRng) -> ([f64; 2], f64) {
     let mut u = |a: f64, b: f64| rng.random_range(a..b);
     match kind {
         AssetKind::AirVents => {
@@ -568,8 +644,8 @@ fn asset_size(kind: AssetKind, rng: &mut SmallRng) -> ([f64; 2], f64) {
     }
 }
 
-/// Random position and heading on the roof, without overlapping earlier assets; `None` after
-/// 40 failed tries.
+/// A fresh asset of `kind` at a random position and heading on the roof, without overlapping
+/// the roof's earlier assets; `None` after 40 failed tries.
 fn place_asset(
     kind: AssetKind,
     b: &Building,
@@ -578,6 +654,21 @@ fn place_asset(
     rng: &mut SmallRng,
 ) -> Option<Asset> {
     let (half, height) = asset_size(kind, rng);
+    let others: Vec<&Asset> = b.assets.iter().map(|&j| &assets[j]).collect();
+    place_sized(kind, (half, height), b, bi, &others, rng)
+}
+
+/// An asset of `kind` with half extents and height `size` at a random position and heading on
+/// roof `b` (number `bi`), keeping 0.3 m from every one of `others`; `None` after 40 failed
+/// tries.
+pub(crate) fn place_sized(
+    kind: AssetKind,
+    (half, height): ([f64; 2], f64),
+    b: &Building,
+    bi: usize,
+    others: &[&Asset],
+    rng: &mut SmallRng,
+) -> Option<Asset> {
     let margin = b.parapet_thickness_m + 0.4;
     let (lo, hi) = (
         [b.min[0] + margin, b.min[1] + margin],
@@ -612,7 +703,7 @@ fn place_asset(
         {
             continue;
         }
-        let clear = b.assets.iter().all(|&j| !obb_overlap(&a, &assets[j], 0.3));
+        let clear = others.iter().all(|o| !obb_overlap(&a, o, 0.3));
         if clear {
             return Some(a);
         }

@@ -20,10 +20,7 @@ fn out_path(name: &str) -> PathBuf {
 fn sites_of(r: &v1::FrameResult) -> Vec<(f64, [f64; 3])> {
     r.sites
         .iter()
-        .map(|s| {
-            let c = s.center.unwrap_or_default();
-            (s.safe_radius_m, [c.x, c.y, c.z])
-        })
+        .map(|s| (s.safe_radius_m, s.center_xyz().unwrap_or_default()))
         .collect()
 }
 
@@ -57,6 +54,29 @@ fn sites_of_json(v: &Value) -> Vec<(f64, [f64; 3])> {
             )
         })
         .collect()
+}
+
+/// Every key path of a JSON document (`.sites[].center`): its schema without the values.
+fn json_paths(v: &Value) -> std::collections::BTreeSet<String> {
+    fn walk(v: &Value, path: String, out: &mut std::collections::BTreeSet<String>) {
+        match v {
+            Value::Object(m) => {
+                for (k, v) in m {
+                    walk(v, format!("{path}.{k}"), out);
+                }
+            }
+            Value::Array(a) => {
+                for v in a {
+                    walk(v, format!("{path}[]"), out);
+                }
+            }
+            _ => {}
+        }
+        out.insert(path);
+    }
+    let mut out = std::collections::BTreeSet::new();
+    walk(v, String::new(), &mut out);
+    out
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -155,6 +175,18 @@ async fn detect_on_a_recording_and_on_a_ply_matches_the_pipeline() {
     .expect("pipeline");
     let v: Value = serde_json::from_str(&out).expect("json");
     assert_same_sites(&sites_of_json(&v), &sites_of(&want));
+
+    // `landing-server detect --json` on the same PLY prints the same schema and sites.
+    let options = landing_server::pipeline::FrameOptions {
+        segmentation_mode: SegmentationMode::PointClasses,
+        ..Default::default()
+    };
+    let pipeline = landing_server::pipeline::Pipeline::geometry_only(Default::default());
+    let offline =
+        landing_server::detect::detect_ply(&ply_path, &options, &pipeline).expect("offline detect");
+    let offline = landing_server::detect::to_json(&offline);
+    assert_eq!(json_paths(&offline), json_paths(&v), "{offline}\nvs\n{v}");
+    assert_same_sites(&sites_of_json(&offline), &sites_of(&want));
 
     let (code, table) = landing(&[
         "--server",

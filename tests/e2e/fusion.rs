@@ -12,17 +12,8 @@ use crate::support::{TestServer, mode, scene, stream_with, untimed};
 
 fn fusing(options: v1::PipelineOptions, fusion: v1::FusionOptions) -> StreamConfig {
     StreamConfig {
-        options: Some(options),
         max_in_flight: 4,
-        fusion: Some(fusion),
-        ..Default::default()
-    }
-}
-
-fn enabled() -> v1::FusionOptions {
-    v1::FusionOptions {
-        enabled: true,
-        ..Default::default()
+        ..StreamConfig::fused_with(fusion).with_options(options)
     }
 }
 
@@ -34,7 +25,7 @@ async fn fused_answers_equal_the_in_process_fused_pipeline() {
     let items = stream_with(
         &server,
         frames.clone(),
-        fusing(options.clone(), enabled()),
+        fusing(options.clone(), v1::FusionOptions::default()),
         None,
     )
     .await;
@@ -91,7 +82,7 @@ async fn a_requested_reset_starts_the_map_over() {
     let server = TestServer::start().await;
     let frames: Vec<v1::Frame> = scene(32).frames.iter().map(|f| f.frame.clone()).collect();
     assert!(frames.len() >= 4);
-    let config = fusing(mode(SegmentationMode::None), enabled());
+    let config = fusing(mode(SegmentationMode::None), v1::FusionOptions::default());
     let items = stream_with(&server, frames, config, Some(2)).await;
     let fused: Vec<&v1::FusionSummary> = items
         .iter()
@@ -113,7 +104,6 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
         .map(|f| f.frame.clone())
         .collect();
     let bad = v1::FusionOptions {
-        enabled: true,
         cell_size_m: Some(-1.0),
         ..Default::default()
     };
@@ -139,7 +129,6 @@ async fn bad_fusion_options_name_their_field_and_defaults_are_reported() {
     }
     let info = server.client().await.info().await.unwrap();
     let defaults = info.default_fusion.expect("default_fusion");
-    assert!(!defaults.enabled);
     let configured = landing_server::Config::default().fusion;
     assert_eq!(defaults.cell_size_m, Some(configured.cell_size_m));
     assert_eq!(defaults.max_cells, Some(configured.max_cells));
@@ -238,7 +227,7 @@ async fn places_seen_only_coarsely_get_no_landing_circle() {
     for limit in [0.0, 0.001] {
         let fusion = v1::FusionOptions {
             max_pixel_footprint_m: Some(limit),
-            ..enabled()
+            ..Default::default()
         };
         let options = mode(SegmentationMode::ClassImage);
         let items = stream_with(&server, frames.clone(), fusing(options, fusion), None).await;

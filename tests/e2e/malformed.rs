@@ -50,12 +50,19 @@ fn raw<'a>(c: &'a mut CameraImage, encoding: &str) -> &'a mut RawImage {
         height: k.height,
         encoding: encoding.into(),
         step: k.width * channels,
-        data: vec![value; (k.width * k.height * channels) as usize],
+        data: vec![value; (k.width * k.height * channels) as usize].into(),
     }));
     match c.image.as_mut() {
         Some(Image::Raw(r)) => r,
         _ => unreachable!("just set"),
     }
+}
+
+/// Frame bytes are shared and immutable: a spoiled byte is a changed copy.
+fn set_byte(data: &mut landing_client::Bytes, at: usize, value: u8) {
+    let mut changed = data.to_vec();
+    changed[at] = value;
+    *data = changed.into();
 }
 
 /// The `i`-th point's coordinate `axis` of the cloud (FLOAT32 fields, as the simulator packs).
@@ -68,7 +75,9 @@ fn set_coordinate(f: &mut Frame, i: usize, axis: usize, v: f32) {
         .expect("the coordinate field")
         .offset as usize;
     let at = i * c.point_stride as usize + offset;
-    c.data[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    let mut data = c.data.to_vec();
+    data[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    c.data = data.into();
 }
 
 const CASES: &[Case] = &[
@@ -88,7 +97,8 @@ const CASES: &[Case] = &[
     Case {
         field: "frame.point_cloud.data",
         spoil: |f, _| {
-            cloud(f).data.pop();
+            let data = &mut cloud(f).data;
+            data.truncate(data.len() - 1);
         },
     },
     Case {
@@ -132,7 +142,7 @@ const CASES: &[Case] = &[
                 .find(|x| x.name == "class")
                 .expect("class")
                 .offset as usize;
-            c.data[o] = 99;
+            set_byte(&mut c.data, o, 99);
         },
     },
     Case {
@@ -232,7 +242,8 @@ const CASES: &[Case] = &[
     Case {
         field: "frame.image.raw.data",
         spoil: |f, _| {
-            raw(image(f), "rgb8").data.pop();
+            let data = &mut raw(image(f), "rgb8").data;
+            data.truncate(data.len() - 1);
         },
     },
     // The class image.
@@ -250,7 +261,7 @@ const CASES: &[Case] = &[
     },
     Case {
         field: "frame.class_image.compressed.data",
-        spoil: |f, _| compressed(class_image(f)).data = b"\x89PNG\r\n\x1a\nnot really".to_vec(),
+        spoil: |f, _| compressed(class_image(f)).data = b"\x89PNG\r\n\x1a\nnot really"[..].into(),
     },
     Case {
         field: "frame.class_image.raw.encoding",
@@ -260,7 +271,7 @@ const CASES: &[Case] = &[
     },
     Case {
         field: "frame.class_image.raw.data",
-        spoil: |f, _| raw(class_image(f), "mono8").data[11] = 99,
+        spoil: |f, _| set_byte(&mut raw(class_image(f), "mono8").data, 11, 99),
     },
     Case {
         field: "frame.class_image.raw.step",

@@ -147,13 +147,8 @@ async fn a_fused_stream_far_from_the_world_origin_answers_as_near_it() {
         })
         .collect();
     let config = StreamConfig {
-        options: Some(mode(SegmentationMode::ClassImage)),
         max_in_flight: 4,
-        fusion: Some(v1::FusionOptions {
-            enabled: true,
-            ..Default::default()
-        }),
-        ..Default::default()
+        ..StreamConfig::fused().with_options(mode(SegmentationMode::ClassImage))
     };
     let answers = |frames: Vec<v1::Frame>| {
         let (server, config) = (&server, config.clone());
@@ -212,7 +207,7 @@ fn in_world_coordinates(frame: &v1::Frame, d: [f64; 3]) -> v1::Frame {
             field("z", 16, v1::NumericType::Float64),
             field("class", 24, v1::NumericType::Uint8),
         ],
-        data,
+        data: data.into(),
         ..Default::default()
     });
     f

@@ -1,10 +1,10 @@
 //! Streams: results equal the in-process pipeline's, one per frame, in order; LATEST skips;
-//! the client's window bounds frames in flight.
+//! the client's window bounds frames in flight; `StreamConfig::fused()` fuses, and only it.
 
 use landing_client::v1::{OverflowPolicy, SegmentationMode};
 use landing_client::{FrameOutcome, StreamConfig};
 
-use crate::support::{TestServer, check, mode, scene};
+use crate::support::{TestServer, check, mode, scene, stream_with};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stream_equals_in_process_pipeline_geometry_only() {
@@ -37,6 +37,48 @@ async fn stream_equals_in_process_pipeline_with_true_classes() {
 async fn stream_equals_in_process_pipeline_with_the_model() {
     let server = TestServer::start().await;
     check(&server, 23, mode(SegmentationMode::Model)).await;
+    server.stop().await;
+}
+
+/// Fusion is asked for in one line and is then done: every answer of a `fused()` stream comes
+/// from the map of the frames so far; a `single_frame()` stream's answers carry no map.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fused_config_fuses_every_frame_and_a_single_frame_config_none() {
+    let server = TestServer::start().await;
+    let frames: Vec<_> = scene(31)
+        .frames
+        .iter()
+        .take(3)
+        .map(|f| f.frame.clone())
+        .collect();
+    let options = mode(SegmentationMode::None);
+    let fused = stream_with(
+        &server,
+        frames.clone(),
+        StreamConfig::fused().with_options(options.clone()),
+        None,
+    )
+    .await;
+    let fused_frames: Vec<u32> = fused
+        .iter()
+        .map(|i| {
+            let r = i.outcome.result().expect("every frame answered");
+            r.fusion.as_ref().expect("a fused answer").frames
+        })
+        .collect();
+    assert_eq!(fused_frames, [1, 2, 3]);
+    let alone = stream_with(
+        &server,
+        frames,
+        StreamConfig::single_frame().with_options(options),
+        None,
+    )
+    .await;
+    assert_eq!(alone.len(), 3);
+    for item in &alone {
+        let r = item.outcome.result().expect("every frame answered");
+        assert!(r.fusion.is_none(), "{:?}", r.fusion);
+    }
     server.stop().await;
 }
 

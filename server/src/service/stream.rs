@@ -107,11 +107,11 @@ impl StreamSession {
         let dispatcher = &self.service.dispatcher;
         let defaults = &self.service.fusion;
         let fusing = self.fusing.get_or_insert_with(|| match &request.fusion {
-            Some(asked) if asked.enabled => match convert::fusion_map(asked, defaults) {
+            Some(asked) => match convert::fusion_map(asked, defaults) {
                 Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
                 Err(e) => Fusing::Refused(e),
             },
-            _ => Fusing::Off,
+            None => Fusing::Off,
         });
         let parts = || convert::stream_parts(request, &dispatcher.pipeline.defaults);
         match fusing {

@@ -1,4 +1,5 @@
-//! Local ENU (metres) to WGS-84 latitude/longitude/height, through earth-centred ECEF.
+//! Local ENU (metres) to WGS-84 latitude/longitude/height, through earth-centred ECEF: how the
+//! service puts latitude and longitude on its sites, and the simulator places its worlds.
 
 /// A WGS-84 position: degrees and metres above the ellipsoid.
 #[derive(Debug, Clone, Copy, PartialEq)]
