@@ -50,13 +50,8 @@ async fn approach(
         })
         .collect();
     let config = StreamConfig {
-        options: Some(mode(SegmentationMode::PointClasses)),
         max_in_flight: 4,
-        fusion: Some(v1::FusionOptions {
-            enabled: true,
-            ..Default::default()
-        }),
-        ..Default::default()
+        ..StreamConfig::fused().with_options(mode(SegmentationMode::PointClasses))
     };
     let items = stream_with(server, frames, config, None).await;
     for item in &items {

@@ -38,8 +38,8 @@ use landing_catalog::rule::SAME_ROOF_HEIGHT_M;
 use landing_catalog::{LatLon, Observation, ObservedSite, Polygon, Timestamp};
 
 use super::Catalog;
-use crate::geodetic::{Geodetic, enu_to_geodetic};
 use crate::pipeline::{Evidence, FrameOutput, NotCatalogued, SEEN_CELL_M, Site, rectangles};
+use landing_geometry::geodetic::{Geodetic, enu_to_geodetic};
 
 /// One stream's feed: dropped with the stream, when it queues the stream's last observation.
 pub(crate) struct Feed {

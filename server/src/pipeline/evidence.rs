@@ -6,7 +6,7 @@
 use std::collections::{BTreeMap, HashMap};
 
 use super::Site;
-use crate::geodetic::Geodetic;
+use landing_geometry::geodetic::Geodetic;
 
 /// Side of the squares the seen area is made of, metres. A square is seen when the cameras
 /// resolved the map points in it (see [`Evidence::seen`]); a metre keeps a roof's seen area to
