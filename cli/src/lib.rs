@@ -19,6 +19,7 @@
 #![forbid(unsafe_code)]
 
 pub mod args;
+pub mod catalog;
 pub mod commands;
 pub mod eval;
 pub mod loadtest;

@@ -97,6 +97,7 @@ mod config;
 mod error;
 mod frame;
 mod outcome;
+mod search;
 
 pub use client::{FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig};
 pub use config::{ClientConfig, DEFAULT_SERVER, RetryPolicy, TlsConfig};
@@ -110,3 +111,4 @@ pub use outcome::{
     FieldViolation, FrameError, FrameOutcome, StreamItem, code_label, duration_from_proto,
 };
 pub use prost::bytes::Bytes;
+pub use search::SiteSearch;

@@ -14,7 +14,7 @@ use landing_server::telemetry::scrape;
 use tonic::transport::Channel;
 use tonic_types::StatusExt as _;
 
-use crate::support::{TestServer, mode, scene, scratch, server_config, stream_with};
+use crate::support::{TestServer, landing, mode, scene, scratch, server_config, stream_with};
 
 /// Where the test frames' world origin lies: midtown Manhattan, 10 m above the ellipsoid.
 const ORIGIN: v1::GeodeticPoint = v1::GeodeticPoint {
@@ -328,5 +328,91 @@ async fn a_server_without_a_catalog_says_so() {
         "{}",
         status.message()
     );
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_cli_imports_candidates_and_lists_them_as_a_table_json_and_geojson() {
+    let config = catalog_config("cli.sqlite");
+    let store = config.catalog.path.display().to_string();
+    let server = TestServer::with_config(config).await;
+    // A 30 m x 20 m footprint about 100 m north-east of the origin, 45 m high.
+    let (lat, lon) = (ORIGIN.latitude_deg + 0.0009, ORIGIN.longitude_deg + 0.0012);
+    let (dlat, dlon) = (0.00009, 0.00018);
+    let ring = [
+        [lon, lat],
+        [lon + dlon, lat],
+        [lon + dlon, lat + dlat],
+        [lon, lat + dlat],
+        [lon, lat],
+    ];
+    let footprints = serde_json::json!({
+        "type": "FeatureCollection",
+        "features": [{
+            "type": "Feature",
+            "id": "bldg-1",
+            "geometry": { "type": "Polygon", "coordinates": [ring] },
+            "properties": { "height": 45.0 },
+        }],
+    });
+    let file = scratch().join("footprints.geojson");
+    std::fs::write(&file, footprints.to_string()).unwrap();
+    let (code, out) = landing(&[
+        "catalog",
+        "import",
+        file.to_str().unwrap(),
+        "--catalog",
+        &store,
+    ])
+    .await;
+    assert_eq!(code, 0, "{out}");
+    assert!(out.contains("imported 1 candidate roofs"), "{out}");
+
+    let near = format!("{},{}", ORIGIN.latitude_deg, ORIGIN.longitude_deg);
+    let search = ["sites", "--near", &near, "--radius", "500", "--candidates"];
+    let with = |extra: &[&str]| {
+        let mut args = vec!["--server", server.url.as_str()];
+        args.extend_from_slice(&search);
+        args.extend_from_slice(extra);
+        args.into_iter().map(str::to_owned).collect::<Vec<_>>()
+    };
+    let run = |args: Vec<String>| async move {
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        landing(&refs).await
+    };
+    let (code, table) = run(with(&[])).await;
+    assert_eq!(code, 0, "{table}");
+    assert!(
+        table.contains("candidate") && table.contains("never a clearance"),
+        "{table}"
+    );
+    let (code, json) = run(with(&["--json"])).await;
+    assert_eq!(code, 0, "{json}");
+    let json: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let site = &json["sites"][0];
+    assert_eq!(site["kind"], "candidate");
+    let distance = site["distance_m"].as_f64().unwrap();
+    assert!((100.0..200.0).contains(&distance), "{site}");
+    let (code, geojson) = run(with(&["--geojson"])).await;
+    assert_eq!(code, 0, "{geojson}");
+    let geojson: serde_json::Value = serde_json::from_str(&geojson).unwrap();
+    assert_eq!(geojson["type"], "FeatureCollection");
+    let feature = &geojson["features"][0];
+    assert_eq!(feature["geometry"]["type"], "Polygon");
+    let ring = feature["geometry"]["coordinates"][0].as_array().unwrap();
+    assert_eq!(ring.first(), ring.last(), "closed ring");
+    assert_eq!(feature["properties"]["kind"], "candidate");
+
+    let (code, out) = run(vec![
+        "--server".into(),
+        server.url.clone(),
+        "sites".into(),
+        "--near".into(),
+        "91,0".into(),
+        "--radius".into(),
+        "500".into(),
+    ])
+    .await;
+    assert_eq!(code, 1, "{out}");
     server.stop().await;
 }
