@@ -337,3 +337,78 @@ impl Writer {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The value of the series written exactly as `series`.
+    fn value(text: &str, series: &str) -> Option<f64> {
+        text.lines()
+            .find_map(|l| l.strip_prefix(series)?.strip_prefix(' '))
+            .and_then(|v| v.trim().parse().ok())
+    }
+
+    fn observation(i: i64) -> Observation {
+        Observation {
+            t: Timestamp::from_unix_ms(1_796_588_100_000 + i),
+            drone_id: format!("d{i}"),
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn with_the_store_down_the_queue_keeps_the_newest_and_counts_the_rest() {
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap()
+            .port();
+        let config = CatalogConfig {
+            url: format!("postgres://landing@127.0.0.1:{port}/catalog?connect_timeout=1"),
+            queue_capacity: 2,
+            retry_interval_s: 60.0,
+            ..CatalogConfig::default()
+        };
+        let metrics = Metrics::default();
+        let catalog = Catalog::start(&config, String::new(), metrics.clone())
+            .unwrap()
+            .unwrap();
+        for i in 0..5 {
+            catalog.submit(observation(i));
+        }
+        let kept: Vec<String> = lock(&catalog.shared.queue)
+            .observations
+            .iter()
+            .map(|o| o.drone_id.clone())
+            .collect();
+        assert_eq!(kept, ["d3", "d4"], "the oldest are dropped");
+        let text = metrics.render();
+        assert_eq!(value(&text, "landing_catalog_dropped_total"), Some(3.0));
+        assert_eq!(value(&text, "landing_catalog_queue_depth"), Some(2.0));
+        // Searches say the catalog is not open, naming it; the writer keeps retrying.
+        let give_up = Instant::now() + Duration::from_secs(10);
+        loop {
+            let e = catalog
+                .search(&SearchQuery::new(
+                    landing_catalog::LatLon::new(40.7, -74.0),
+                    500.0,
+                ))
+                .unwrap_err();
+            assert!(matches!(e, Error::CatalogUnavailable(_)), "{e}");
+            if !e.to_string().contains("being opened") || Instant::now() > give_up {
+                assert!(e.to_string().contains("Postgres"), "{e}");
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let runtime = tokio::runtime::Runtime::new().unwrap();
+        runtime.block_on(catalog.stop(Duration::from_secs(5)));
+        let text = metrics.render();
+        assert_eq!(
+            value(&text, "landing_catalog_dropped_total"),
+            Some(5.0),
+            "what could not be written when it stopped is counted"
+        );
+    }
+}
