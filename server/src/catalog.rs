@@ -145,18 +145,48 @@ impl Catalog {
         self.shared.config.max_age()
     }
 
-    /// Writes what is queued (one try) and stops the writer thread; waits at most `grace`.
+    /// Writes what is queued (one try) and stops the writer thread; waits at most `grace`. The
+    /// search handle is closed off the async runtime too (the PostgreSQL client blocks on a
+    /// runtime of its own when it closes).
     pub async fn stop(&self, grace: Duration) {
         lock(&self.shared.queue).stopping = true;
         self.shared.wake.notify_all();
-        let Some(handle) = lock(&self.shared.writer).take() else {
-            return;
-        };
-        let joined = tokio::task::spawn_blocking(move || handle.join());
+        let reader = std::mem::replace(
+            &mut *self
+                .shared
+                .reader
+                .write()
+                .unwrap_or_else(|e| e.into_inner()),
+            Err("the catalog has stopped".into()),
+        );
+        let handle = lock(&self.shared.writer).take();
+        let joined = tokio::task::spawn_blocking(move || {
+            drop(reader);
+            handle.map(std::thread::JoinHandle::join)
+        });
         if tokio::time::timeout(grace, joined).await.is_err() {
             tracing::warn!(
                 "the catalog's writer did not finish in time; queued observations are lost"
             );
+        }
+    }
+}
+
+impl Drop for Shared {
+    /// A catalog dropped without [`Catalog::stop`] (a server task aborted) may be dropped on an
+    /// async runtime's thread, where closing a PostgreSQL handle would panic: it is closed on a
+    /// thread of its own.
+    fn drop(&mut self) {
+        let reader = std::mem::replace(
+            self.reader.get_mut().unwrap_or_else(|e| e.into_inner()),
+            Err(String::new()),
+        );
+        if let Ok(store) = reader
+            && tokio::runtime::Handle::try_current().is_ok()
+        {
+            let _ = std::thread::Builder::new()
+                .name("catalog-close".into())
+                .spawn(move || drop(store));
         }
     }
 }

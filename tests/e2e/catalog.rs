@@ -416,3 +416,58 @@ async fn the_cli_imports_candidates_and_lists_them_as_a_table_json_and_geojson()
     assert_eq!(code, 1, "{out}");
     server.stop().await;
 }
+
+#[path = "../../catalog/tests/support/postgres.rs"]
+#[allow(dead_code)]
+mod pg;
+
+/// A fresh PostGIS database on the shared test server, as a `postgres://` URL.
+fn postgis_url(server: &pg::PgServer) -> String {
+    let conninfo = server.create_database();
+    let field = |key: &str| {
+        conninfo
+            .split_whitespace()
+            .find_map(|kv| kv.strip_prefix(key)?.strip_prefix('='))
+            .expect("a conninfo field")
+            .to_owned()
+    };
+    format!(
+        "postgres://postgres@127.0.0.1:{}/{}?connect_timeout=10",
+        field("port"),
+        field("dbname")
+    )
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fused_approach_fills_a_postgis_catalog_and_a_search_finds_it() {
+    // The PostgreSQL client runs a runtime of its own: off this one.
+    let (postgres, url) = tokio::task::spawn_blocking(|| {
+        let postgres = pg::shared();
+        let url = postgis_url(&postgres);
+        (postgres, url)
+    })
+    .await
+    .unwrap();
+    let mut config = catalog_config("postgis-unused.sqlite");
+    config.catalog.url = url;
+    let server = TestServer::with_config(config).await;
+    approach(&server, 41, Some(ORIGIN)).await;
+    let mut client = raw_client(&server).await;
+    let page = search_until_found(&mut client, search_near(ORIGIN, 500.0)).await;
+    assert!(
+        !page.sites.is_empty(),
+        "the PostGIS catalog knows the approach's sites"
+    );
+    assert!(
+        page.sites
+            .iter()
+            .all(|s| s.kind == v1::SiteKind::Site as i32 && s.distance_m <= 500.0 && s.frames >= 3)
+    );
+    let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
+    assert_eq!(value(&metrics, "landing_catalog_connected"), Some(1.0));
+    server.stop().await;
+    // The server stops where it may block.
+    tokio::task::spawn_blocking(move || drop(postgres))
+        .await
+        .unwrap();
+}
