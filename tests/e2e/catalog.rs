@@ -8,7 +8,9 @@ use std::time::{Duration, Instant, SystemTime};
 
 use landing_client::v1::landing_service_client::LandingServiceClient;
 use landing_client::v1::{self, SegmentationMode};
-use landing_client::{FrameOutcome, StreamConfig, StreamItem};
+use landing_client::{
+    FrameOutcome, PointCloudBuilder, StreamConfig, StreamItem, unpack_point_cloud,
+};
 use landing_server::Config;
 use landing_server::telemetry::scrape;
 use tonic::transport::Channel;
@@ -49,11 +51,7 @@ async fn approach(
             ..f.frame.clone()
         })
         .collect();
-    let config = StreamConfig {
-        max_in_flight: 4,
-        ..StreamConfig::fused().with_options(mode(SegmentationMode::PointClasses))
-    };
-    let items = stream_with(server, frames, config, None).await;
+    let items = approach_over(server, frames).await;
     for item in &items {
         assert!(
             matches!(item.outcome, FrameOutcome::Result(_)),
@@ -62,6 +60,42 @@ async fn approach(
         );
     }
     items
+}
+
+/// A fused approach over `frames`, classes from the points (the simulator's).
+async fn approach_over(server: &TestServer, frames: Vec<v1::Frame>) -> Vec<StreamItem> {
+    let config = StreamConfig {
+        max_in_flight: 4,
+        ..StreamConfig::fused().with_options(mode(SegmentationMode::PointClasses))
+    };
+    stream_with(server, frames, config, None).await
+}
+
+/// `seed`'s frames with `origin`, every point classed as a tarp: the roofs covered.
+fn covered(seed: u64) -> Vec<v1::Frame> {
+    let tarp = landing_geometry::SemanticClass::Tarp as u8;
+    scene(seed)
+        .frames
+        .iter()
+        .map(|f| {
+            let mut frame = f.frame.clone();
+            let cloud = frame.point_cloud.take().unwrap();
+            let points = unpack_point_cloud(&cloud).unwrap().points;
+            let classes = vec![tarp; points.len()];
+            let packed = PointCloudBuilder::new(&points)
+                .classes(&classes)
+                .build()
+                .unwrap();
+            frame.point_cloud = Some(v1::PointCloud {
+                fields: packed.fields,
+                point_stride: packed.point_stride,
+                data: packed.data,
+                ..cloud
+            });
+            frame.geodetic_origin = Some(ORIGIN);
+            frame
+        })
+        .collect()
 }
 
 async fn raw_client(server: &TestServer) -> LandingServiceClient<Channel> {
@@ -470,4 +504,47 @@ async fn a_fused_approach_fills_a_postgis_catalog_and_a_search_finds_it() {
     tokio::task::spawn_blocking(move || drop(postgres))
         .await
         .unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_later_approach_that_finds_the_roofs_covered_withdraws_their_sites() {
+    let server = TestServer::with_config(catalog_config("withdraw.sqlite")).await;
+    approach(&server, 41, Some(ORIGIN)).await;
+    let mut client = raw_client(&server).await;
+    let before = search_until_found(&mut client, search_near(ORIGIN, 500.0)).await;
+    assert!(!before.sites.is_empty());
+
+    // The same approach again, the roofs under a tarp: no site, and every one is withdrawn.
+    let items = approach_over(&server, covered(41)).await;
+    assert!(
+        items
+            .iter()
+            .all(|i| i.outcome.result().is_some_and(|r| r.sites.is_empty())),
+        "nothing is landable under a tarp"
+    );
+    let give_up = Instant::now() + Duration::from_secs(10);
+    let after = loop {
+        let page = client
+            .search_landing_sites(search_near(ORIGIN, 500.0))
+            .await
+            .unwrap()
+            .into_inner();
+        if page.sites.is_empty() || Instant::now() > give_up {
+            break page;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    assert!(
+        after.sites.is_empty(),
+        "withdrawn at once: {:?}",
+        after.sites
+    );
+    let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
+    let withdrawn = "landing_catalog_site_changes_total{change=\"withdrawn\"}";
+    assert_eq!(
+        value(&metrics, withdrawn),
+        Some(before.sites.len() as f64),
+        "{metrics}"
+    );
+    server.stop().await;
 }
