@@ -15,9 +15,12 @@
 //!              area geography(POLYGON, 4326), bbox geometry)     -- GiST on bbox
 //! ```
 //!
-//! Searches filter with `ST_DWithin(center, point, r, false)` and order nearest first with
-//! `ORDER BY center <-> point, id LIMIT k` (the GiST index's nearest-neighbour scan); the distance
-//! reported is that same sphere distance, so page tokens and results agree. Writers serialise on a
+//! Searches filter with `ST_DWithin(center, point, r, false)`. Nearest first takes the k nearest
+//! by the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`, bounded by
+//! the circle's box), then re-reads the small circle they fill to order ties by id (see
+//! `NEAREST_SQL`); the other orders read the whole circle and sort it. The distance reported
+//! is that same sphere distance, so page tokens and results agree. Searches are prepared once
+//! per connection. Writers serialise on a
 //! transaction-scoped advisory lock ([`WRITE_LOCK`]): a batch reads what it may change and writes
 //! in one transaction that no other writer interleaves with, so two replicas applying
 //! overlapping observations end as if one went first (row locks alone would not stop two writers
