@@ -43,7 +43,8 @@ pub trait Store: Send + Sync {
     /// catalog from one store to another, or loading a benchmark's catalog fast (SQLite: one
     /// prepared insert per record; PostGIS: `COPY`). Ids are assigned anew (`site.id` is
     /// ignored). Records are validated first (errors name `sites[i]....`); a `source_id` already
-    /// stored fails the whole call. Returns how many were stored.
+    /// stored fails the whole call. Returns how many were stored. Load large catalogs in batches
+    /// of tens of thousands: each call is one statement on PostGIS, under its statement timeout.
     fn load_sites(&self, sites: &[Site]) -> Result<u64>;
 
     /// How many records are stored, by kind (for the `sites stored` metric).
