@@ -178,83 +178,8 @@ impl Store for SqliteStore {
         let r = Resolved::new(query, now)?;
         let conn = self.lock();
         r.page(&mut |r, kind, after, limit| {
-            let kind_code = kind_code(kind);
-            // Candidates have no age; confirmed sites older than the cut-off are left out here.
-            let cutoff = match kind {
-                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
-                SiteKind::Candidate => i64::MIN,
-            };
-            // Nearest first reads a small circle first and widens it until it holds the page:
-            // everything within `reach` is read, so what lies beyond ranks after the page. The
-            // other orders need the whole circle.
-            let nearest_first = matches!(
-                (r.order, kind),
-                (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate)
-            );
-            let mut reach = if nearest_first {
-                (after.map_or(0.0, |(key, _)| key.max(0.0)) + FIRST_REACH_M).min(r.radius_m)
-            } else {
-                r.radius_m
-            };
-            // First the few columns that filter and order, from the R*Tree alone (its
-            // auxiliary columns), for every box it returns; then whole records (polygons
-            // parsed) for the page alone.
-            let mut stmt = conn
-                .prepare_cached(
-                    "SELECT id, latitude_deg, longitude_deg, safe_radius_m, last_confirmed_ms \
-                     FROM sites_rtree WHERE max_lat >= ?1 AND min_lat <= ?2 AND max_lon >= ?3 \
-                     AND min_lon <= ?4 AND kind = ?5 AND safe_radius_m >= ?6 \
-                     AND last_confirmed_ms >= ?7",
-                )
-                .map_err(db)?;
-            let mut page = loop {
-                let bbox = Bbox::around(r.center, reach).padded_m(BOX_PAD_M);
-                let rows = stmt
-                    .query_map(
-                        params![
-                            bbox.min_lat,
-                            bbox.max_lat,
-                            bbox.min_lon,
-                            bbox.max_lon,
-                            kind_code,
-                            r.min_safe_radius_m,
-                            cutoff
-                        ],
-                        |row| {
-                            Ok(Site {
-                                id: SiteId(row.get(0)?),
-                                kind,
-                                polygon: Polygon::default(),
-                                center: LatLon::new(row.get(1)?, row.get(2)?),
-                                safe_radius_m: row.get(3)?,
-                                plane_height_m: 0.0,
-                                area_m2: 0.0,
-                                first_seen: Timestamp::default(),
-                                last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
-                                frames: 0,
-                                approaches: 0,
-                                drone_id: String::new(),
-                                approach_id: String::new(),
-                                model_id: String::new(),
-                                source_id: None,
-                            })
-                        },
-                    )
-                    .map_err(db)?;
-                let mut all = Vec::new();
-                for row in rows {
-                    let site = row.map_err(db)?;
-                    let distance_m = distance_m(r.center, site.center);
-                    if distance_m <= reach && r.admits(&site, distance_m) {
-                        all.push(Found { site, distance_m });
-                    }
-                }
-                let page = order_group(r, all, after, limit);
-                if page.len() >= limit || reach >= r.radius_m {
-                    break page;
-                }
-                reach = (reach * 3.0).min(r.radius_m);
-            };
+            let mut page = group_page(&conn, r, kind, after, limit)?;
+            // Whole records (polygons parsed) for the page alone.
             let mut whole = conn
                 .prepare_cached(&format!(
                     "SELECT {SITE_COLUMNS} FROM sites s WHERE s.id = ?1"
@@ -578,6 +503,95 @@ impl SqliteTx<'_> {
             .map_err(db)?;
         Ok(())
     }
+}
+
+/// One kind's page of a search, its records holding only what filters and orders them: from the
+/// R*Tree alone (its auxiliary columns). Nearest first reads a small circle first and widens it
+/// until it holds the page: everything within `reach` is read, so what lies beyond ranks after
+/// the page. The other orders need the whole circle.
+fn group_page(
+    conn: &Connection,
+    r: &Resolved,
+    kind: SiteKind,
+    after: Option<(f64, i64)>,
+    limit: usize,
+) -> Result<Vec<Found>> {
+    let nearest_first = matches!(
+        (r.order, kind),
+        (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate)
+    );
+    let mut reach = if nearest_first {
+        (after.map_or(0.0, |(key, _)| key.max(0.0)) + FIRST_REACH_M).min(r.radius_m)
+    } else {
+        r.radius_m
+    };
+    loop {
+        let page = order_group(r, in_reach(conn, r, kind, reach)?, after, limit);
+        if page.len() >= limit || reach >= r.radius_m {
+            return Ok(page);
+        }
+        reach = (reach * 3.0).min(r.radius_m);
+    }
+}
+
+/// The sites of `kind` within `reach` of the search's centre that the search admits, as the
+/// R*Tree's auxiliary columns hold them (id, centre, radius, last confirmation).
+fn in_reach(conn: &Connection, r: &Resolved, kind: SiteKind, reach: f64) -> Result<Vec<Found>> {
+    // Candidates have no age; confirmed sites older than the cut-off are left out here.
+    let cutoff = match kind {
+        SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+        SiteKind::Candidate => i64::MIN,
+    };
+    let mut stmt = conn
+        .prepare_cached(
+            "SELECT id, latitude_deg, longitude_deg, safe_radius_m, last_confirmed_ms \
+             FROM sites_rtree WHERE max_lat >= ?1 AND min_lat <= ?2 AND max_lon >= ?3 \
+             AND min_lon <= ?4 AND kind = ?5 AND safe_radius_m >= ?6 \
+             AND last_confirmed_ms >= ?7",
+        )
+        .map_err(db)?;
+    let bbox = Bbox::around(r.center, reach).padded_m(BOX_PAD_M);
+    let rows = stmt
+        .query_map(
+            params![
+                bbox.min_lat,
+                bbox.max_lat,
+                bbox.min_lon,
+                bbox.max_lon,
+                kind_code(kind),
+                r.min_safe_radius_m,
+                cutoff
+            ],
+            |row| {
+                Ok(Site {
+                    id: SiteId(row.get(0)?),
+                    kind,
+                    polygon: Polygon::default(),
+                    center: LatLon::new(row.get(1)?, row.get(2)?),
+                    safe_radius_m: row.get(3)?,
+                    plane_height_m: 0.0,
+                    area_m2: 0.0,
+                    first_seen: Timestamp::default(),
+                    last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
+                    frames: 0,
+                    approaches: 0,
+                    drone_id: String::new(),
+                    approach_id: String::new(),
+                    model_id: String::new(),
+                    source_id: None,
+                })
+            },
+        )
+        .map_err(db)?;
+    let mut found = Vec::new();
+    for row in rows {
+        let site = row.map_err(db)?;
+        let distance_m = distance_m(r.center, site.center);
+        if distance_m <= reach && r.admits(&site, distance_m) {
+            found.push(Found { site, distance_m });
+        }
+    }
+    Ok(found)
 }
 
 fn migrate(conn: &mut Connection) -> Result<()> {
