@@ -71,6 +71,37 @@ pub struct Site {
 }
 
 impl Site {
+    /// Fails naming the first bad field under `field` (for [`crate::Store::load_sites`]).
+    pub(crate) fn validate(&self, field: &str) -> Result<()> {
+        self.polygon.validate(&format!("{field}.polygon"))?;
+        self.center.validate(&format!("{field}.center"))?;
+        if !(self.safe_radius_m.is_finite() && self.safe_radius_m >= 0.0)
+            || self.safe_radius_m > MAX_RADIUS_M
+        {
+            return Err(Error::invalid(
+                format!("{field}.safe_radius_m"),
+                format!(
+                    "{} is not a radius in [0, {MAX_RADIUS_M}] m",
+                    self.safe_radius_m
+                ),
+            ));
+        }
+        check_height(self.plane_height_m, &format!("{field}.plane_height_m"))?;
+        if !(self.area_m2.is_finite() && self.area_m2 >= 0.0) {
+            return Err(Error::invalid(
+                format!("{field}.area_m2"),
+                format!("{} is not an area >= 0", self.area_m2),
+            ));
+        }
+        check_id(&self.drone_id, &format!("{field}.drone_id"))?;
+        check_id(&self.approach_id, &format!("{field}.approach_id"))?;
+        check_id(&self.model_id, &format!("{field}.model_id"))?;
+        if let Some(id) = &self.source_id {
+            check_id(id, &format!("{field}.source_id"))?;
+        }
+        Ok(())
+    }
+
     /// The box the stores index a record by: its polygon's and its safe circle's.
     pub fn bbox(&self) -> Bbox {
         self.polygon

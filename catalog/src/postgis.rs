@@ -15,9 +15,12 @@
 //!              area geography(POLYGON, 4326), bbox geometry)     -- GiST on bbox
 //! ```
 //!
-//! Searches filter with `ST_DWithin(center, point, r, false)` and order nearest first with
-//! `ORDER BY center <-> point, id LIMIT k` (the GiST index's nearest-neighbour scan); the distance
-//! reported is that same sphere distance, so page tokens and results agree. Writers serialise on a
+//! Searches filter with `ST_DWithin(center, point, r, false)`. Nearest first takes the k nearest
+//! by the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`, bounded by
+//! the circle's box), then re-reads the small circle they fill to order ties by id (see
+//! `NEAREST_SQL`); the other orders read the whole circle and sort it. The distance reported
+//! is that same sphere distance, so page tokens and results agree. Searches are prepared once
+//! per connection. Writers serialise on a
 //! transaction-scoped advisory lock ([`WRITE_LOCK`]): a batch reads what it may change and writes
 //! in one transaction that no other writer interleaves with, so two replicas applying
 //! overlapping observations end as if one went first (row locks alone would not stop two writers
@@ -28,10 +31,11 @@
 //! calling it from inside a tokio runtime panics, so the server calls it from its own threads (or
 //! `spawn_blocking`). A lost connection is opened again on the next call.
 
-use std::sync::{Mutex, MutexGuard};
+use std::collections::HashMap;
+use std::sync::{LazyLock, Mutex, MutexGuard};
 use std::time::Duration;
 
-use postgres::{Client, NoTls, Row, Transaction};
+use postgres::{Client, NoTls, Row, Statement, Transaction};
 
 use crate::apply::{WriteTx, apply_sorted, validate};
 use crate::error::{Error, Result};
@@ -47,6 +51,16 @@ const BACKEND: &str = "postgis";
 
 /// The advisory lock key every catalog writer takes (`pg_advisory_xact_lock`): "landcat" in ASCII.
 pub const WRITE_LOCK: i64 = 0x006c_616e_6463_6174;
+
+/// How long a connection attempt may take, when the URL does not say (`connect_timeout`).
+pub const CONNECT_TIMEOUT: Duration = Duration::from_secs(5);
+/// Idle time before TCP keepalives probe the server, when the URL does not say.
+pub const KEEPALIVE_IDLE: Duration = Duration::from_secs(15);
+/// How long sent data may stay unacknowledged before the connection is dropped.
+pub const TCP_USER_TIMEOUT: Duration = Duration::from_secs(15);
+/// The longest statement (lock waits included) the server runs for the store, when the URL's
+/// `options` do not set `statement_timeout`.
+pub const STATEMENT_TIMEOUT: Duration = Duration::from_secs(30);
 
 const MIGRATIONS: &[&str] = &[r#"
 CREATE EXTENSION IF NOT EXISTS postgis;
@@ -88,10 +102,55 @@ const SITE_COLUMNS: &str = "id, kind, ST_AsGeoJSON(polygon, 15), ST_Y(center::ge
 /// The query point `$1` = latitude, `$2` = longitude, as geography.
 const POINT: &str = "ST_SetSRID(ST_MakePoint($2, $1), 4326)::geography";
 
+/// A search's parameters, in every search statement: `$1` latitude, `$2` longitude, `$3` kind,
+/// `$4` radius, `$5` minimum safe radius, `$6` age cut-off (ms), `$7`, `$8` the keyset position
+/// (sort key, id) to start after, `$9` how many.
+///
+/// Nearest first: the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`,
+/// bounded by the circle's box so a sparse area does not scan on) finds the k nearest; a
+/// second scan of the circle they fill takes every record as near as the k-th, so ties are
+/// ordered by id (a KNN scan orders by distance alone; `ORDER BY distance, id` would read and
+/// sort the whole search circle instead).
+static NEAREST_SQL: LazyLock<String> = LazyLock::new(|| {
+    format!(
+        "WITH knn AS (SELECT center <-> {POINT} AS d FROM catalog_sites \
+         WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
+         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
+         AND (center <-> {POINT}, id) > ($7, $8) \
+         ORDER BY center <-> {POINT} LIMIT $9) \
+         SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
+         WHERE kind = $3 AND ST_DWithin(center, {POINT}, (SELECT MAX(d) FROM knn) + 1, false) \
+         AND center <-> {POINT} <= (SELECT MAX(d) FROM knn) AND center <-> {POINT} <= $4 \
+         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
+         AND (center <-> {POINT}, id) > ($7, $8) \
+         ORDER BY center <-> {POINT}, id LIMIT $9"
+    )
+});
+
+/// Largest safe radius first: every record in the circle, sorted (top-N).
+static SAFE_RADIUS_SQL: LazyLock<String> = LazyLock::new(|| ordered_sql("(-safe_radius_m)"));
+
+/// Most recently confirmed first: every record in the circle, sorted (top-N).
+static FRESHNESS_SQL: LazyLock<String> =
+    LazyLock::new(|| ordered_sql("(-(last_confirmed_ms::float8))"));
+
+fn ordered_sql(key: &str) -> String {
+    format!(
+        "SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
+         WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
+         AND center <-> {POINT} <= $4 \
+         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
+         AND ({key}, id) > ($7, $8) \
+         ORDER BY {key}, id LIMIT $9"
+    )
+}
+
 /// The catalog in a PostgreSQL database with PostGIS.
 pub struct PostgisStore {
-    url: String,
+    config: postgres::Config,
     client: Mutex<Option<Client>>,
+    /// The searches, prepared once per connection (emptied when it is opened again).
+    statements: Mutex<HashMap<String, Statement>>,
 }
 
 impl std::fmt::Debug for PostgisStore {
@@ -102,13 +161,21 @@ impl std::fmt::Debug for PostgisStore {
 }
 
 impl PostgisStore {
-    /// Connects to `url` (`postgres://user:password@host:port/database`, or the key=value form;
-    /// `connect_timeout=5` is worth setting) and brings the schema up to date. The database user
-    /// needs `CREATE` there, and the PostGIS extension must exist or be creatable.
+    /// Connects to `url` (`postgres://user:password@host:port/database`, or the key=value form)
+    /// and brings the schema up to date. The database user needs `CREATE` there, and the
+    /// PostGIS extension must exist or be creatable.
+    ///
+    /// No call waits on a lost server for long: what the URL leaves unset gets
+    /// [`CONNECT_TIMEOUT`] to connect, TCP keepalives after [`KEEPALIVE_IDLE`] and a TCP user
+    /// timeout of [`TCP_USER_TIMEOUT`] (a server gone from the network fails the call), and
+    /// every session a server-side `statement_timeout` of [`STATEMENT_TIMEOUT`] (a statement or
+    /// a wait for the write lock that runs longer is cancelled). A server that stops or restarts
+    /// closes the connection: the call fails at once and the next one connects again.
     pub fn connect(url: &str) -> Result<Self> {
         let store = PostgisStore {
-            url: url.to_string(),
+            config: session_config(url)?,
             client: Mutex::new(None),
+            statements: Mutex::new(HashMap::new()),
         };
         {
             let mut guard = store.client()?;
@@ -135,7 +202,11 @@ impl PostgisStore {
     fn client(&self) -> Result<MutexGuard<'_, Option<Client>>> {
         let mut guard = self.client.lock().unwrap_or_else(|e| e.into_inner());
         if guard.as_ref().is_none_or(Client::is_closed) {
-            *guard = Some(Client::connect(&self.url, NoTls).map_err(db)?);
+            self.statements
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .clear();
+            *guard = Some(self.config.connect(NoTls).map_err(db)?);
         }
         Ok(guard)
     }
@@ -167,14 +238,23 @@ impl Store for PostgisStore {
         let r = Resolved::new(query, now)?;
         let mut guard = self.client()?;
         let client = guard.as_mut().ok_or_else(disconnected)?;
+        let mut statements = self.statements.lock().unwrap_or_else(|e| e.into_inner());
         r.page(&mut |r, kind, after, limit| {
-            let key = match (r.order, kind) {
-                (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate) => {
-                    format!("(center <-> {POINT})")
-                }
-                (Order::SafeRadius, _) => "(-safe_radius_m)".to_string(),
-                (Order::Freshness, SiteKind::Confirmed) => {
-                    "(-(last_confirmed_ms::float8))".to_string()
+            let nearest_first = matches!(
+                (r.order, kind),
+                (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate)
+            );
+            let sql = match (nearest_first, r.order) {
+                (true, _) => &*NEAREST_SQL,
+                (false, Order::SafeRadius) => &*SAFE_RADIUS_SQL,
+                (false, _) => &*FRESHNESS_SQL,
+            };
+            let stmt = match statements.get(sql.as_str()) {
+                Some(s) => s.clone(),
+                None => {
+                    let s = client.prepare(sql).map_err(db)?;
+                    statements.insert(sql.clone(), s.clone());
+                    s
                 }
             };
             let cutoff = match kind {
@@ -182,18 +262,10 @@ impl Store for PostgisStore {
                 SiteKind::Candidate => i64::MIN,
             };
             let (after_key, after_id) = after.unwrap_or((f64::NEG_INFINITY, i64::MIN));
-            let sql = format!(
-                "SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
-                 WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
-                 AND center <-> {POINT} <= $4 \
-                 AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
-                 AND ({key}, id) > ($7, $8) \
-                 ORDER BY {key}, id LIMIT $9"
-            );
             let limit = i64::try_from(limit).unwrap_or(i64::MAX);
             let rows = client
                 .query(
-                    &sql,
+                    &stmt,
                     &[
                         &r.center.latitude_deg,
                         &r.center.longitude_deg,
@@ -250,6 +322,31 @@ impl Store for PostgisStore {
                 w.insert(&c.to_site(now))?;
             }
             Ok(candidates.len() as u64)
+        })
+    }
+
+    fn load_sites(&self, sites: &[Site]) -> Result<u64> {
+        for (i, s) in sites.iter().enumerate() {
+            s.validate(&format!("sites[{i}]"))?;
+        }
+        // COPY's text format: one line per record, tab-separated, geometries as EWKT.
+        let mut text = String::with_capacity(sites.len() * 512);
+        for s in sites {
+            copy_line(&mut text, s);
+        }
+        self.write(|tx| {
+            let mut w = tx
+                .copy_in(
+                    "COPY catalog_sites (kind, polygon, center, bbox, safe_radius_m, \
+                     plane_height_m, area_m2, first_seen_ms, last_confirmed_ms, frames, \
+                     approaches, drone_id, approach_id, model_id, source_id) FROM STDIN",
+                )
+                .map_err(db)?;
+            std::io::Write::write_all(&mut w, text.as_bytes()).map_err(|e| Error::Storage {
+                backend: BACKEND,
+                source: Box::new(e),
+            })?;
+            w.finish().map_err(db)
         })
     }
 
@@ -443,6 +540,26 @@ impl WriteTx for PgTx<'_, '_> {
     }
 }
 
+/// The URL's settings with the store's timeouts where it leaves them unset.
+fn session_config(url: &str) -> Result<postgres::Config> {
+    let mut c: postgres::Config = url.parse().map_err(db)?;
+    if c.get_connect_timeout().is_none() {
+        c.connect_timeout(CONNECT_TIMEOUT);
+    }
+    if c.get_keepalives_idle() == Duration::from_secs(2 * 3600) {
+        c.keepalives_idle(KEEPALIVE_IDLE);
+    }
+    if c.get_tcp_user_timeout().is_none() {
+        c.tcp_user_timeout(TCP_USER_TIMEOUT);
+    }
+    let options = c.get_options().unwrap_or_default().to_string();
+    if !options.contains("statement_timeout") {
+        let ms = STATEMENT_TIMEOUT.as_millis();
+        c.options(format!("{options} -c statement_timeout={ms}").trim());
+    }
+    Ok(c)
+}
+
 fn migrate(client: &mut Client) -> Result<()> {
     let mut tx = client.transaction().map_err(db)?;
     tx.execute("SELECT pg_advisory_xact_lock($1)", &[&WRITE_LOCK])
@@ -509,6 +626,73 @@ fn parse_polygon(text: &str) -> Result<Polygon> {
         serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
     polygon_from_coordinates(&v["coordinates"], "polygon")
         .map_err(|e| corrupt(format!("a stored polygon: {e}")))
+}
+
+/// One record as a line of `COPY … FROM STDIN` text (the columns of [`Store::load_sites`]).
+fn copy_line(out: &mut String, s: &Site) {
+    use std::fmt::Write as _;
+    let ring = |out: &mut String, r: &[LatLon]| {
+        out.push('(');
+        for p in r.iter().chain(r.first()) {
+            if !out.ends_with('(') {
+                out.push(',');
+            }
+            let _ = write!(out, "{} {}", p.longitude_deg, p.latitude_deg);
+        }
+        out.push(')');
+    };
+    let _ = write!(out, "{}\tSRID=4326;POLYGON(", kind_code(s.kind));
+    for (i, r) in s.polygon.rings().enumerate() {
+        if i > 0 {
+            out.push(',');
+        }
+        ring(out, r);
+    }
+    let b = s.bbox();
+    let _ = write!(
+        out,
+        ")\tSRID=4326;POINT({} {})\tSRID=4326;POLYGON(({w} {so},{w} {n},{e} {n},{e} {so},{w} {so}))",
+        s.center.longitude_deg,
+        s.center.latitude_deg,
+        w = b.min_lon,
+        e = b.max_lon,
+        so = b.min_lat,
+        n = b.max_lat,
+    );
+    let _ = write!(
+        out,
+        "\t{}\t{}\t{}\t{}\t{}\t{}\t{}",
+        s.safe_radius_m,
+        s.plane_height_m,
+        s.area_m2,
+        s.first_seen.unix_ms(),
+        s.last_confirmed.unix_ms(),
+        clamp_i64(s.frames),
+        clamp_i64(s.approaches),
+    );
+    for text in [&s.drone_id, &s.approach_id, &s.model_id] {
+        out.push('\t');
+        copy_text(out, text);
+    }
+    out.push('\t');
+    match &s.source_id {
+        Some(id) => copy_text(out, id),
+        None => out.push_str("\\N"),
+    }
+    out.push('\n');
+}
+
+/// `text` escaped for COPY's text format.
+fn copy_text(out: &mut String, text: &str) {
+    for c in text.chars() {
+        match c {
+            '\\' => out.push_str("\\\\"),
+            '\t' => out.push_str("\\t"),
+            '\n' => out.push_str("\\n"),
+            '\r' => out.push_str("\\r"),
+            c => out.push(c),
+        }
+    }
 }
 
 fn kind_code(kind: SiteKind) -> i16 {

@@ -1,6 +1,6 @@
 //! The embedded store: one SQLite file (WAL), sites indexed by an R*Tree over their boxes.
 //!
-//! # Schema (version 1)
+//! # Schema (version 2)
 //!
 //! ```sql
 //! schema_version(version INTEGER)                   -- one row per applied migration
@@ -10,13 +10,18 @@
 //!       safe_radius_m REAL, plane_height_m REAL, area_m2 REAL,
 //!       first_seen_ms INTEGER, last_confirmed_ms INTEGER, frames INTEGER, approaches INTEGER,
 //!       drone_id TEXT, approach_id TEXT, model_id TEXT, source_id TEXT UNIQUE)
-//! sites_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon)  -- polygon ∪ safe circle
+//! sites_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon,   -- polygon ∪ safe circle
+//!       +kind, +latitude_deg, +longitude_deg,       -- (version 2) auxiliary copies of what a
+//!       +safe_radius_m, +last_confirmed_ms)         -- search filters and orders by
 //! seen(id INTEGER PRIMARY KEY, observed_ms INTEGER, polygon TEXT)   -- areas observations resolved
 //! seen_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon)
 //! ```
 //!
 //! The R*Tree keeps 32-bit boxes rounded outward and has no nearest-k, so a search asks it for the
-//! boxes meeting the search circle's box (padded), then measures, filters and orders in Rust.
+//! boxes meeting the search circle's box (padded), then measures, filters and orders in Rust;
+//! what it filters and orders by is read from the R*Tree's auxiliary columns (no lookup in
+//! `sites` per box), whole records only for the page. Nearest first reads a small circle first
+//! and widens it threefold until it holds the page; the other orders read the whole circle.
 //! Writes take SQLite's write lock at `BEGIN IMMEDIATE`; other connections wait for it up to the
 //! busy timeout (5 s). WAL with `synchronous = NORMAL`: a process killed mid-write loses at most
 //! the transaction in flight (one `apply` batch); a power cut may also lose the last few commits.
@@ -32,18 +37,30 @@ use crate::error::{Error, Result};
 use crate::geo::{Bbox, LatLon, Polygon, distance_m};
 use crate::geojson::{polygon_from_coordinates, polygon_geometry};
 use crate::model::{Candidate, Observation, Site, SiteId, SiteKind};
-use crate::query::{Found, Resolved, SearchPage, SearchQuery, order_group};
+use crate::query::{Found, Order, Resolved, SearchPage, SearchQuery, order_group};
 use crate::rule::ApplyReport;
 use crate::store::{Counts, Store};
 use crate::time::Timestamp;
 
 const BACKEND: &str = "sqlite";
 
+/// The first circle a nearest-first search reads, metres beyond the previous page's last result
+/// (it grows threefold until it holds the page).
+const FIRST_REACH_M: f64 = 64.0;
+
+/// How much of the file each connection maps into memory (shared with the OS page cache).
+const MMAP_BYTES: u64 = 1 << 30;
+/// Each connection's page cache, KiB.
+const CACHE_KIB: u64 = 32 * 1024;
+
 /// How long a write waits for another connection's write lock.
 pub const BUSY_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// The migrations, in order: the schema is at version `MIGRATIONS.len()`.
-const MIGRATIONS: &[&str] = &[r#"
+/// The migrations, in order: the schema is at version `MIGRATIONS.len()`. Version 2 rebuilds the
+/// sites' R*Tree with auxiliary columns: opening a version-1 file of a million sites takes some
+/// seconds once.
+const MIGRATIONS: &[&str] = &[
+    r#"
 CREATE TABLE sites (
     id INTEGER PRIMARY KEY,
     kind INTEGER NOT NULL CHECK (kind IN (0, 1)),
@@ -71,7 +88,17 @@ CREATE TABLE seen (
 );
 CREATE INDEX seen_observed ON seen (observed_ms);
 CREATE VIRTUAL TABLE seen_rtree USING rtree (id, min_lat, max_lat, min_lon, max_lon);
-"#];
+"#,
+    r#"
+CREATE VIRTUAL TABLE sites_rtree_v2 USING rtree (id, min_lat, max_lat, min_lon, max_lon,
+    +kind, +latitude_deg, +longitude_deg, +safe_radius_m, +last_confirmed_ms);
+INSERT INTO sites_rtree_v2 SELECT t.id, t.min_lat, t.max_lat, t.min_lon, t.max_lon, s.kind,
+    s.latitude_deg, s.longitude_deg, s.safe_radius_m, s.last_confirmed_ms
+    FROM sites_rtree t JOIN sites s ON s.id = t.id;
+DROP TABLE sites_rtree;
+ALTER TABLE sites_rtree_v2 RENAME TO sites_rtree;
+"#,
+];
 
 const SITE_COLUMNS: &str = "s.id, s.kind, s.polygon, s.latitude_deg, s.longitude_deg, \
     s.safe_radius_m, s.plane_height_m, s.area_m2, s.first_seen_ms, s.last_confirmed_ms, s.frames, \
@@ -101,8 +128,13 @@ impl SqliteStore {
         let _mode: String = conn
             .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))
             .map_err(db)?;
-        conn.execute_batch("PRAGMA synchronous = NORMAL;")
-            .map_err(db)?;
+        // Searches read the R*Tree's pages at random: map the file (no read call per page) and
+        // keep more of it cached than SQLite's 2 MB default.
+        conn.execute_batch(&format!(
+            "PRAGMA synchronous = NORMAL; PRAGMA mmap_size = {MMAP_BYTES}; \
+             PRAGMA cache_size = -{CACHE_KIB};"
+        ))
+        .map_err(db)?;
         migrate(&mut conn)?;
         Ok(SqliteStore {
             conn: Mutex::new(conn),
@@ -145,66 +177,9 @@ impl Store for SqliteStore {
     fn search(&self, query: &SearchQuery, now: Timestamp) -> Result<SearchPage> {
         let r = Resolved::new(query, now)?;
         let conn = self.lock();
-        let bbox = Bbox::around(r.center, r.radius_m).padded_m(BOX_PAD_M);
         r.page(&mut |r, kind, after, limit| {
-            let kind_code = kind_code(kind);
-            // Candidates have no age; confirmed sites older than the cut-off are left out here.
-            let cutoff = match kind {
-                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
-                SiteKind::Candidate => i64::MIN,
-            };
-            // First the few columns that filter and order, for every box the R*Tree returns;
-            // then whole records (polygons parsed) for the page alone.
-            let mut stmt = conn
-                .prepare_cached(
-                    "SELECT s.id, s.latitude_deg, s.longitude_deg, s.safe_radius_m, \
-                     s.last_confirmed_ms FROM sites_rtree t JOIN sites s ON s.id = t.id \
-                     WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 \
-                     AND t.min_lon <= ?4 AND s.kind = ?5 AND s.safe_radius_m >= ?6 \
-                     AND s.last_confirmed_ms >= ?7",
-                )
-                .map_err(db)?;
-            let rows = stmt
-                .query_map(
-                    params![
-                        bbox.min_lat,
-                        bbox.max_lat,
-                        bbox.min_lon,
-                        bbox.max_lon,
-                        kind_code,
-                        r.min_safe_radius_m,
-                        cutoff
-                    ],
-                    |row| {
-                        Ok(Site {
-                            id: SiteId(row.get(0)?),
-                            kind,
-                            polygon: Polygon::default(),
-                            center: LatLon::new(row.get(1)?, row.get(2)?),
-                            safe_radius_m: row.get(3)?,
-                            plane_height_m: 0.0,
-                            area_m2: 0.0,
-                            first_seen: Timestamp::default(),
-                            last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
-                            frames: 0,
-                            approaches: 0,
-                            drone_id: String::new(),
-                            approach_id: String::new(),
-                            model_id: String::new(),
-                            source_id: None,
-                        })
-                    },
-                )
-                .map_err(db)?;
-            let mut all = Vec::new();
-            for row in rows {
-                let site = row.map_err(db)?;
-                let distance_m = distance_m(r.center, site.center);
-                if r.admits(&site, distance_m) {
-                    all.push(Found { site, distance_m });
-                }
-            }
-            let mut page = order_group(r, all, after, limit);
+            let mut page = group_page(&conn, r, kind, after, limit)?;
+            // Whole records (polygons parsed) for the page alone.
             let mut whole = conn
                 .prepare_cached(&format!(
                     "SELECT {SITE_COLUMNS} FROM sites s WHERE s.id = ?1"
@@ -273,6 +248,22 @@ impl Store for SqliteStore {
         }
         tx.commit().map_err(db)?;
         Ok(candidates.len() as u64)
+    }
+
+    fn load_sites(&self, sites: &[Site]) -> Result<u64> {
+        for (i, s) in sites.iter().enumerate() {
+            s.validate(&format!("sites[{i}]"))?;
+        }
+        let mut conn = self.lock();
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(db)?;
+        let mut w = SqliteTx { tx: &tx };
+        for s in sites {
+            w.insert(s)?;
+        }
+        tx.commit().map_err(db)?;
+        Ok(sites.len() as u64)
     }
 
     fn counts(&self) -> Result<Counts> {
@@ -344,7 +335,7 @@ impl WriteTx for SqliteTx<'_> {
         let mut stmt = self
             .tx
             .prepare_cached(&format!(
-                "SELECT {SITE_COLUMNS} FROM sites_rtree t JOIN sites s ON s.id = t.id \
+                "SELECT {SITE_COLUMNS} FROM sites_rtree t CROSS JOIN sites s ON s.id = t.id \
                  WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 AND t.min_lon <= ?4 \
                  AND s.kind = 0"
             ))
@@ -362,7 +353,7 @@ impl WriteTx for SqliteTx<'_> {
         let mut stmt = self
             .tx
             .prepare_cached(
-                "SELECT s.observed_ms, s.polygon FROM seen_rtree t JOIN seen s ON s.id = t.id \
+                "SELECT s.observed_ms, s.polygon FROM seen_rtree t CROSS JOIN seen s ON s.id = t.id \
                  WHERE t.max_lat >= ?1 AND t.min_lat <= ?2 AND t.max_lon >= ?3 AND t.min_lon <= ?4 \
                  AND s.observed_ms > ?5",
             )
@@ -409,7 +400,7 @@ impl WriteTx for SqliteTx<'_> {
             ])
             .map_err(db)?;
         let id = self.tx.last_insert_rowid();
-        self.index("sites_rtree", id, &s.bbox())?;
+        self.index_site(id, s)?;
         Ok(SiteId(id))
     }
 
@@ -444,7 +435,7 @@ impl WriteTx for SqliteTx<'_> {
             .map_err(db)?
             .execute([s.id.0])
             .map_err(db)?;
-        self.index("sites_rtree", s.id.0, &s.bbox())
+        self.index_site(s.id.0, s)
     }
 
     fn delete(&mut self, id: SiteId) -> Result<()> {
@@ -476,6 +467,32 @@ impl WriteTx for SqliteTx<'_> {
 }
 
 impl SqliteTx<'_> {
+    /// A site's box, and beside it (auxiliary columns) what a search filters and orders by.
+    fn index_site(&self, id: i64, s: &Site) -> Result<()> {
+        let b = s.bbox();
+        self.tx
+            .prepare_cached(
+                "INSERT INTO sites_rtree (id, min_lat, max_lat, min_lon, max_lon, kind, \
+                 latitude_deg, longitude_deg, safe_radius_m, last_confirmed_ms) \
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10)",
+            )
+            .map_err(db)?
+            .execute(params![
+                id,
+                b.min_lat,
+                b.max_lat,
+                b.min_lon,
+                b.max_lon,
+                kind_code(s.kind),
+                s.center.latitude_deg,
+                s.center.longitude_deg,
+                s.safe_radius_m,
+                s.last_confirmed.unix_ms()
+            ])
+            .map_err(db)?;
+        Ok(())
+    }
+
     fn index(&self, table: &str, id: i64, b: &Bbox) -> Result<()> {
         self.tx
             .prepare_cached(&format!(
@@ -486,6 +503,95 @@ impl SqliteTx<'_> {
             .map_err(db)?;
         Ok(())
     }
+}
+
+/// One kind's page of a search, its records holding only what filters and orders them: from the
+/// R*Tree alone (its auxiliary columns). Nearest first reads a small circle first and widens it
+/// until it holds the page: everything within `reach` is read, so what lies beyond ranks after
+/// the page. The other orders need the whole circle.
+fn group_page(
+    conn: &Connection,
+    r: &Resolved,
+    kind: SiteKind,
+    after: Option<(f64, i64)>,
+    limit: usize,
+) -> Result<Vec<Found>> {
+    let nearest_first = matches!(
+        (r.order, kind),
+        (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate)
+    );
+    let mut reach = if nearest_first {
+        (after.map_or(0.0, |(key, _)| key.max(0.0)) + FIRST_REACH_M).min(r.radius_m)
+    } else {
+        r.radius_m
+    };
+    loop {
+        let page = order_group(r, in_reach(conn, r, kind, reach)?, after, limit);
+        if page.len() >= limit || reach >= r.radius_m {
+            return Ok(page);
+        }
+        reach = (reach * 3.0).min(r.radius_m);
+    }
+}
+
+/// The sites of `kind` within `reach` of the search's centre that the search admits, as the
+/// R*Tree's auxiliary columns hold them (id, centre, radius, last confirmation).
+fn in_reach(conn: &Connection, r: &Resolved, kind: SiteKind, reach: f64) -> Result<Vec<Found>> {
+    // Candidates have no age; confirmed sites older than the cut-off are left out here.
+    let cutoff = match kind {
+        SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+        SiteKind::Candidate => i64::MIN,
+    };
+    let mut stmt = conn
+        .prepare_cached(
+            "SELECT id, latitude_deg, longitude_deg, safe_radius_m, last_confirmed_ms \
+             FROM sites_rtree WHERE max_lat >= ?1 AND min_lat <= ?2 AND max_lon >= ?3 \
+             AND min_lon <= ?4 AND kind = ?5 AND safe_radius_m >= ?6 \
+             AND last_confirmed_ms >= ?7",
+        )
+        .map_err(db)?;
+    let bbox = Bbox::around(r.center, reach).padded_m(BOX_PAD_M);
+    let rows = stmt
+        .query_map(
+            params![
+                bbox.min_lat,
+                bbox.max_lat,
+                bbox.min_lon,
+                bbox.max_lon,
+                kind_code(kind),
+                r.min_safe_radius_m,
+                cutoff
+            ],
+            |row| {
+                Ok(Site {
+                    id: SiteId(row.get(0)?),
+                    kind,
+                    polygon: Polygon::default(),
+                    center: LatLon::new(row.get(1)?, row.get(2)?),
+                    safe_radius_m: row.get(3)?,
+                    plane_height_m: 0.0,
+                    area_m2: 0.0,
+                    first_seen: Timestamp::default(),
+                    last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
+                    frames: 0,
+                    approaches: 0,
+                    drone_id: String::new(),
+                    approach_id: String::new(),
+                    model_id: String::new(),
+                    source_id: None,
+                })
+            },
+        )
+        .map_err(db)?;
+    let mut found = Vec::new();
+    for row in rows {
+        let site = row.map_err(db)?;
+        let distance_m = distance_m(r.center, site.center);
+        if distance_m <= reach && r.admits(&site, distance_m) {
+            found.push(Found { site, distance_m });
+        }
+    }
+    Ok(found)
 }
 
 fn migrate(conn: &mut Connection) -> Result<()> {

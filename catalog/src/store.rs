@@ -3,7 +3,7 @@
 use std::time::Duration;
 
 use crate::error::Result;
-use crate::model::{Candidate, Observation};
+use crate::model::{Candidate, Observation, Site};
 use crate::query::{SearchPage, SearchQuery};
 use crate::rule::ApplyReport;
 use crate::time::Timestamp;
@@ -38,6 +38,14 @@ pub trait Store: Send + Sync {
     /// Stores candidate roofs, imported at `now`, in one transaction; a candidate whose
     /// `source_id` is already stored replaces that record. Returns how many were stored.
     fn import_candidates(&self, candidates: &[Candidate], now: Timestamp) -> Result<u64>;
+
+    /// Stores records as they are, in one transaction, bypassing the update rule: copying a
+    /// catalog from one store to another, or loading a benchmark's catalog fast (SQLite: one
+    /// prepared insert per record; PostGIS: `COPY`). Ids are assigned anew (`site.id` is
+    /// ignored). Records are validated first (errors name `sites[i]....`); a `source_id` already
+    /// stored fails the whole call. Returns how many were stored. Load large catalogs in batches
+    /// of tens of thousands: each call is one statement on PostGIS, under its statement timeout.
+    fn load_sites(&self, sites: &[Site]) -> Result<u64>;
 
     /// How many records are stored, by kind (for the `sites stored` metric).
     fn counts(&self) -> Result<Counts>;

@@ -4,6 +4,7 @@
 //! macro at the bottom instantiates every test for each store.
 
 #[path = "support/postgres.rs"]
+#[allow(dead_code)]
 mod pg;
 
 use std::sync::Arc;
@@ -11,7 +12,7 @@ use std::time::Duration;
 
 use landing_catalog::{
     Candidate, Error, Found, LatLon, LocalFrame, Observation, ObservedSite, Order, Polygon,
-    PostgisStore, SearchQuery, SiteKind, SqliteStore, Store, Timestamp, geojson,
+    PostgisStore, SearchQuery, Site, SiteId, SiteKind, SqliteStore, Store, Timestamp, geojson,
 };
 
 /// Opens handles to one fresh database.
@@ -826,6 +827,84 @@ mod suite {
     }
 
     /// Seeded random sites and searches, paged, against a brute-force answer over every record.
+    /// `load_sites` stores records as they are (text fields with COPY's special characters
+    /// included), refuses a bad record naming it, and ties in distance page by id.
+    pub fn loaded_sites_are_stored_as_they_are(b: &dyn Backend) {
+        let store = b.open();
+        let record = |x: f64, r: f64| Site {
+            id: SiteId(0),
+            kind: SiteKind::Confirmed,
+            polygon: square(x, 0.0, r + 1.0),
+            center: at(x, 0.0),
+            safe_radius_m: r,
+            plane_height_m: 12.5,
+            area_m2: (2.0 * (r + 1.0)).powi(2),
+            first_seen: t(1),
+            last_confirmed: t(2),
+            frames: 7,
+            approaches: 2,
+            drone_id: "drone\twith\\odd\ncharacters\r".into(),
+            approach_id: "a".into(),
+            model_id: "m".into(),
+            source_id: None,
+        };
+        // Five records at one point: equally near every query.
+        let mut sites: Vec<Site> = (0..5).map(|_| record(30.0, 4.0)).collect();
+        sites.push(record(60.0, 6.0));
+        let mut candidate = record(90.0, 8.0);
+        candidate.kind = SiteKind::Candidate;
+        candidate.source_id = Some("building\\7".into());
+        sites.push(candidate);
+        let mut bad = sites.clone();
+        bad[1].center.latitude_deg = 91.0;
+        assert_eq!(
+            field_of(store.load_sites(&bad).unwrap_err()),
+            "sites[1].center.latitude_deg"
+        );
+        assert!(
+            everything(&*store).is_empty(),
+            "a refused load writes nothing"
+        );
+        assert_eq!(store.load_sites(&sites).unwrap(), 7);
+        let all = everything(&*store);
+        assert_eq!(all.len(), 7);
+        let first = &all[0].site;
+        let mut expected = sites[0].clone();
+        expected.id = first.id;
+        assert_eq!(first.drone_id, expected.drone_id);
+        assert_eq!(
+            (
+                first.frames,
+                first.approaches,
+                first.first_seen,
+                first.last_confirmed
+            ),
+            (7, 2, t(1), t(2))
+        );
+        assert!((first.center.latitude_deg - expected.center.latitude_deg).abs() < 1e-12);
+        let c = all.last().unwrap();
+        assert_eq!(c.site.kind, SiteKind::Candidate);
+        assert_eq!(c.site.source_id.as_deref(), Some("building\\7"));
+        // Ties in distance go by id, across pages of one.
+        let mut q = SearchQuery::new(ORIGIN, 500.0);
+        q.max_age = None;
+        q.page_size = 1;
+        let mut ids = Vec::new();
+        loop {
+            let page = store.search(&q, t(10)).unwrap();
+            ids.extend(page.sites.iter().map(|f| f.site.id));
+            if page.next_page_token.is_empty() {
+                break;
+            }
+            q.page_token = page.next_page_token;
+        }
+        assert_eq!(ids.len(), 6, "{ids:?}");
+        assert!(ids[..5].windows(2).all(|w| w[0] < w[1]), "{ids:?}");
+        let counts = store.counts().unwrap();
+        assert_eq!((counts.confirmed, counts.candidates), (6, 1));
+        store.check_integrity().unwrap();
+    }
+
     pub fn random_searches_match_brute_force(b: &dyn Backend) {
         let store = b.open();
         let mut rng = Lcg(0x5eed_0001);
@@ -1000,6 +1079,10 @@ macro_rules! conformance {
                 suite::geojson_results(&$backend);
             }
             #[test]
+            fn loaded_sites_are_stored_as_they_are() {
+                suite::loaded_sites_are_stored_as_they_are(&$backend);
+            }
+            #[test]
             fn random_searches_match_brute_force() {
                 suite::random_searches_match_brute_force(&$backend);
             }
@@ -1020,7 +1103,7 @@ mod specific {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("catalog.sqlite");
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 1);
+        assert_eq!(store.schema_version().unwrap(), 2);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
@@ -1040,6 +1123,56 @@ mod specific {
             matches!(e, Error::Corrupt { .. }) && e.to_string().contains("99"),
             "{e}"
         );
+    }
+
+    /// A file written at schema version 1 (the R*Tree without auxiliary columns) is migrated
+    /// on open and answers as before.
+    #[test]
+    fn sqlite_version_1_file_is_migrated() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("catalog.sqlite");
+        let raw = rusqlite::Connection::open(&path).unwrap();
+        raw.execute_batch(
+            "CREATE TABLE schema_version (version INTEGER NOT NULL);
+             INSERT INTO schema_version VALUES (1);
+             CREATE TABLE sites (id INTEGER PRIMARY KEY, kind INTEGER NOT NULL, polygon TEXT NOT NULL,
+                 latitude_deg REAL NOT NULL, longitude_deg REAL NOT NULL, safe_radius_m REAL NOT NULL,
+                 plane_height_m REAL NOT NULL, area_m2 REAL NOT NULL, first_seen_ms INTEGER NOT NULL,
+                 last_confirmed_ms INTEGER NOT NULL, frames INTEGER NOT NULL,
+                 approaches INTEGER NOT NULL, drone_id TEXT NOT NULL, approach_id TEXT NOT NULL,
+                 model_id TEXT NOT NULL, source_id TEXT UNIQUE);
+             CREATE INDEX sites_kind_last_confirmed ON sites (kind, last_confirmed_ms);
+             CREATE VIRTUAL TABLE sites_rtree USING rtree (id, min_lat, max_lat, min_lon, max_lon);
+             CREATE TABLE seen (id INTEGER PRIMARY KEY, observed_ms INTEGER NOT NULL,
+                 polygon TEXT NOT NULL);
+             CREATE INDEX seen_observed ON seen (observed_ms);
+             CREATE VIRTUAL TABLE seen_rtree USING rtree (id, min_lat, max_lat, min_lon, max_lon);",
+        )
+        .unwrap();
+        let s = site(0.0, 0.0, 3.0, 10.0);
+        let polygon = geojson::polygon_geometry(&s.polygon, false).to_string();
+        let (lat, lon) = (s.center.latitude_deg, s.center.longitude_deg);
+        raw.execute(
+            "INSERT INTO sites VALUES (7, 0, ?1, ?2, ?3, 3.0, 10.0, 64.0, ?4, ?4, 1, 1, 'd', 'a', \
+             'm', NULL)",
+            rusqlite::params![polygon, lat, lon, t(10).unix_ms()],
+        )
+        .unwrap();
+        raw.execute(
+            "INSERT INTO sites_rtree VALUES (7, ?1, ?2, ?3, ?4)",
+            rusqlite::params![lat - 0.001, lat + 0.001, lon - 0.001, lon + 0.001],
+        )
+        .unwrap();
+        drop(raw);
+        let store = SqliteStore::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 2);
+        store.check_integrity().unwrap();
+        let page = store
+            .search(&SearchQuery::new(ORIGIN, 100.0), t(20))
+            .unwrap();
+        assert_eq!(page.sites.len(), 1);
+        assert_eq!(page.sites[0].site.id.0, 7);
+        assert_eq!(page.sites[0].site.safe_radius_m, 3.0);
     }
 
     #[test]

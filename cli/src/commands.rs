@@ -83,13 +83,13 @@ pub struct PipelineArgs {
     /// Where point classes come from.
     #[arg(long, value_parser = crate::args::segmentation_parser(), default_value = "auto")]
     pub segmentation: SegmentationMode,
-    /// l_max: longest triangle edge, metres.
+    /// The paper's l_max: longest triangle edge, metres.
     #[arg(long)]
     pub max_triangle_edge: Option<f64>,
-    /// dot_min: minimum |n·z| of a triangle normal.
+    /// The paper's dot_min: minimum |n·z| of a triangle normal.
     #[arg(long)]
     pub min_normal_dot: Option<f64>,
-    /// z_min: triangles flatter than this bypass the normal test, metres.
+    /// The paper's z_min: triangles flatter than this bypass the normal test, metres.
     #[arg(long)]
     pub max_triangle_height: Option<f64>,
     /// Polylabel precision, metres.

@@ -82,21 +82,21 @@ pub struct DetectArgs {
     /// file exists (always tried with --segmentation model).
     #[arg(long, value_name = "FILE.onnx")]
     pub model: Option<PathBuf>,
-    /// l_max: triangles with a longer edge are dropped, metres.
+    /// The paper's l_max: triangles with a longer edge are dropped, metres.
     #[arg(long, value_name = "M")]
-    pub l_max: Option<f64>,
-    /// dot_min: minimum |n . z| of a triangle normal.
+    pub max_triangle_edge: Option<f64>,
+    /// The paper's dot_min: minimum |n . z| of a triangle normal.
     #[arg(long, value_name = "D")]
-    pub dot_min: Option<f64>,
-    /// z_min: triangles flatter than this bypass the normal test, metres.
+    pub min_normal_dot: Option<f64>,
+    /// The paper's z_min: triangles flatter than this bypass the normal test, metres.
     #[arg(long, value_name = "M")]
-    pub z_min: Option<f64>,
+    pub max_triangle_height: Option<f64>,
     /// A class allowed in landing planes (repeat for several); default: building rooftop (4).
     #[arg(long = "landable-class", value_name = "ID")]
     pub landable_classes: Vec<u8>,
     /// Polylabel precision, metres.
     #[arg(long, value_name = "M")]
-    pub precision: Option<f64>,
+    pub polylabel_precision: Option<f64>,
     /// Planar regions with fewer triangles are dropped.
     #[arg(long, value_name = "N")]
     pub min_region_triangles: Option<usize>,
@@ -123,15 +123,15 @@ impl DetectArgs {
     pub fn options(&self) -> FrameOptions {
         let d = Params::default();
         let params = Params {
-            max_triangle_edge_m: self.l_max.unwrap_or(d.max_triangle_edge_m),
-            min_normal_dot: self.dot_min.unwrap_or(d.min_normal_dot),
-            max_triangle_height_m: self.z_min.unwrap_or(d.max_triangle_height_m),
+            max_triangle_edge_m: self.max_triangle_edge.unwrap_or(d.max_triangle_edge_m),
+            min_normal_dot: self.min_normal_dot.unwrap_or(d.min_normal_dot),
+            max_triangle_height_m: self.max_triangle_height.unwrap_or(d.max_triangle_height_m),
             landable_classes: if self.landable_classes.is_empty() {
                 d.landable_classes.clone()
             } else {
                 self.landable_classes.clone()
             },
-            polylabel_precision_m: self.precision.unwrap_or(d.polylabel_precision_m),
+            polylabel_precision_m: self.polylabel_precision.unwrap_or(d.polylabel_precision_m),
             min_region_triangles: self.min_region_triangles.unwrap_or(d.min_region_triangles),
             max_sites: self.max_sites.unwrap_or(d.max_sites),
             ..d

@@ -36,6 +36,11 @@ pub fn shared() -> Arc<PgServer> {
     s
 }
 
+/// A server of its own, for a test that stops and restarts it (the others share [`shared`]).
+pub fn dedicated() -> PgServer {
+    PgServer::start()
+}
+
 impl PgServer {
     fn start() -> PgServer {
         let bin = find_bin();
@@ -82,18 +87,7 @@ impl PgServer {
                 "--no-sync",
             ],
         );
-        let sock = server.dir.path().display().to_string();
-        let opts = format!(
-            "-p {port} -k {sock} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off \
-             -c full_page_writes=off -c max_connections=200"
-        );
-        let log = format!("{sock}/server.log");
-        server.run(
-            "pg_ctl",
-            &[
-                "-D", &data, "-o", &opts, "-l", &log, "-w", "-t", "120", "start",
-            ],
-        );
+        server.start_server();
         let mut admin = server.connect("postgres");
         admin
             .batch_execute("CREATE DATABASE template_postgis")
@@ -105,6 +99,36 @@ impl PgServer {
                 panic!("CREATE EXTENSION postgis failed ({e}): PostGIS is not installed? {SETUP}")
             });
         server
+    }
+
+    /// Stops the server at once, as a crash would: `pg_ctl stop -m immediate` (every server
+    /// process quits without a checkpoint; connections drop).
+    pub fn stop_immediately(&self) {
+        let data = self.data();
+        self.run("pg_ctl", &["-D", &data, "-m", "immediate", "-w", "stop"]);
+    }
+
+    /// Starts the server again (after [`PgServer::stop_immediately`]) on the same port; it
+    /// recovers from its write-ahead log first.
+    pub fn start_again(&self) {
+        self.start_server();
+    }
+
+    fn start_server(&self) {
+        let data = self.data();
+        let sock = self.dir.path().display().to_string();
+        let opts = format!(
+            "-p {} -k {sock} -c listen_addresses=127.0.0.1 -c fsync=off -c synchronous_commit=off \
+             -c full_page_writes=off -c max_connections=200",
+            self.port
+        );
+        let log = format!("{sock}/server.log");
+        self.run(
+            "pg_ctl",
+            &[
+                "-D", &data, "-o", &opts, "-l", &log, "-w", "-t", "120", "start",
+            ],
+        );
     }
 
     /// A fresh, empty database with PostGIS; its connection string.
