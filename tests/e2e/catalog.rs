@@ -135,6 +135,30 @@ async fn search_until_found(
     }
 }
 
+/// Waits until the catalog has written what the streams so far sent it: an empty queue and no
+/// new write for 300 ms (a stream's last observation is queued as its stream closes).
+async fn settle(server: &TestServer) {
+    let addr = server.metrics_addr().expect("metrics enabled");
+    let read = || async move {
+        let text = scrape(addr).await.unwrap();
+        (
+            value(&text, "landing_catalog_queue_depth"),
+            value(&text, "landing_catalog_writes_total"),
+            value(&text, "landing_catalog_dropped_total"),
+        )
+    };
+    let give_up = Instant::now() + Duration::from_secs(10);
+    let mut last = read().await;
+    loop {
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let now = read().await;
+        if (now == last && now.0 == Some(0.0)) || Instant::now() > give_up {
+            return;
+        }
+        last = now;
+    }
+}
+
 /// The value of the series written exactly as `series`, if present.
 fn value(text: &str, series: &str) -> Option<f64> {
     text.lines()
@@ -157,6 +181,7 @@ async fn a_fused_approach_with_an_origin_fills_the_catalog_and_a_search_finds_it
     let items = approach(&server, 41, Some(ORIGIN)).await;
     let last = items.last().and_then(|i| i.outcome.result()).unwrap();
     assert!(!last.sites.is_empty(), "the approach finds sites");
+    settle(&server).await;
     let page = search_until_found(&mut client, search_near(ORIGIN, 500.0)).await;
     assert!(
         !page.sites.is_empty(),
@@ -282,6 +307,7 @@ async fn malformed_searches_name_their_field() {
 async fn a_tampered_page_token_is_refused() {
     let server = TestServer::with_config(catalog_config("tokens.sqlite")).await;
     approach(&server, 41, Some(ORIGIN)).await;
+    settle(&server).await;
     let mut client = raw_client(&server).await;
     let first = v1::SearchLandingSitesRequest {
         page_size: 1,
@@ -510,12 +536,14 @@ async fn a_fused_approach_fills_a_postgis_catalog_and_a_search_finds_it() {
 async fn a_later_approach_that_finds_the_roofs_covered_withdraws_their_sites() {
     let server = TestServer::with_config(catalog_config("withdraw.sqlite")).await;
     approach(&server, 41, Some(ORIGIN)).await;
+    settle(&server).await;
     let mut client = raw_client(&server).await;
     let before = search_until_found(&mut client, search_near(ORIGIN, 500.0)).await;
     assert!(!before.sites.is_empty());
 
     // The same approach again, the roofs under a tarp: no site, and every one is withdrawn.
     let items = approach_over(&server, covered(41)).await;
+    settle(&server).await;
     assert!(
         items
             .iter()
