@@ -103,6 +103,20 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "register_scans": bool,
         "max_pixel_footprint_m": (int, float),
     },
+    "catalog": {
+        "enabled": bool,
+        "path": str,
+        "url": str,
+        "queue_capacity": int,
+        "batch_max": int,
+        "flush_interval_s": (int, float),
+        "observe_interval_s": (int, float),
+        "min_frames": int,
+        "max_age_s": (int, float),
+        "retention_s": (int, float),
+        "expire_interval_s": (int, float),
+        "retry_interval_s": (int, float),
+    },
 }
 ENUMS = {
     ("segmentation", "execution_provider"): ("cpu", "cuda"),

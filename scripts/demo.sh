@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: set up, build, start the service with the shipped model,
-# replay the sample recording through it (ranked sites per frame), write overlay PNGs of a few
-# frames to out/ (camera view + top-down, like the paper's Fig. 4), then stop the server.
+# replay the sample recording through it (ranked sites per frame), replay it fused with a WGS-84
+# origin and print the landing sites the catalog now knows near its roofs, write overlay PNGs of a
+# few frames to out/ (camera view + top-down, like the paper's Fig. 4), then stop the server.
 # Installs only what that needs: the ONNX Runtime library (scripts/setup.sh); no Python.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -22,6 +23,13 @@ for _ in $(seq 1 150); do "$bin/landing" info --server "http://$addr" >/dev/null
 
 "$bin/landing" info --server "http://$addr"
 "$bin/landing" replay samples/rooftops.mcap --server "http://$addr"
+
+# The fleet's catalog (the server's default: SQLite in data/catalog.sqlite): the same approach,
+# fused and placed in midtown Manhattan, feeds it; then ask what it knows near the sample's roofs.
+origin=40.7536,-73.9832
+"$bin/landing" replay samples/rooftops.mcap --fuse --origin "$origin" --server "http://$addr" >/dev/null
+sleep 2  # the catalog's writer gathers a batch for up to catalog.flush_interval_s (1 s)
+"$bin/landing" sites --near "$origin" --radius 1000 --server "http://$addr"
 mkdir -p out
 for frame in 0 7 14; do
   "$bin/landing" render samples/rooftops.mcap --frame "$frame" --server "http://$addr" --out "out/frame-$frame.png"

@@ -69,6 +69,12 @@ pub enum Command {
     /// Score landing sites against simulator ground truth in three segmentation modes (exit 7
     /// when a gated mode returned an unsafe site).
     Eval(crate::eval::EvalArgs),
+    /// Landing sites the fleet's catalog knows near a place: candidates for a drone to confirm
+    /// with its own stream, never a clearance to land.
+    Sites(crate::catalog::SitesArgs),
+    /// The fleet's landing-site catalog: import candidate roofs.
+    #[command(subcommand)]
+    Catalog(crate::catalog::CatalogCommand),
 }
 
 /// Pipeline options shared by the subcommands that send frames.
@@ -151,8 +157,33 @@ pub struct ReplayArgs {
     /// (with the server's `[fusion]` defaults).
     #[arg(long)]
     pub fuse: bool,
+    /// The WGS-84 position of the recording's world origin, `LAT,LON[,ALT]` (degrees, metres
+    /// above the ellipsoid), for frames that carry none: sites get latitude and longitude, and a
+    /// fused replay feeds the server's landing-site catalog.
+    #[arg(long, value_name = "LAT,LON[,ALT]")]
+    pub origin: Option<String>,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
+}
+
+/// `--origin LAT,LON[,ALT]`.
+fn geodetic_origin(text: &str) -> Result<landing_proto::v1::GeodeticPoint, CliError> {
+    let numbers: Option<Vec<f64>> = text.split(',').map(|v| v.trim().parse().ok()).collect();
+    match numbers.as_deref() {
+        Some(&[latitude_deg, longitude_deg]) | Some(&[latitude_deg, longitude_deg, _]) => {
+            Ok(landing_proto::v1::GeodeticPoint {
+                latitude_deg,
+                longitude_deg,
+                altitude_m: numbers
+                    .as_ref()
+                    .and_then(|n| n.get(2).copied())
+                    .unwrap_or(0.0),
+            })
+        }
+        _ => Err(usage(format!(
+            "--origin {text:?}: expected LAT,LON or LAT,LON,ALT"
+        ))),
+    }
 }
 
 /// `--overflow` values.
@@ -286,6 +317,10 @@ pub async fn execute(cli: &Cli, out: &mut (dyn Write + Send)) -> Result<u8, CliE
         Command::Loadtest(a) => loadtest(cli, a, out).await,
         Command::Render(a) => render_cmd(cli, a, out).await,
         Command::Eval(a) => crate::eval::eval_cmd(&cli.connection, a, cli.json, out).await,
+        Command::Sites(a) => crate::catalog::sites(&cli.connection, a, cli.json, out).await,
+        Command::Catalog(crate::catalog::CatalogCommand::Import(a)) => {
+            crate::catalog::import(a, out).await
+        }
     }
 }
 
@@ -380,6 +415,12 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
     let mut frames = recorded_frames(&a.recording, &a.pipeline)?;
     if let Some(l) = a.limit {
         frames.truncate(l);
+    }
+    if let Some(text) = &a.origin {
+        let origin = geodetic_origin(text)?;
+        for f in &mut frames {
+            f.frame.geodetic_origin.get_or_insert(origin);
+        }
     }
     let client = connect(&cli.connection).await?;
     let mut mcap = a

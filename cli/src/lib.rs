@@ -4,8 +4,10 @@
 //! Every subcommand talks to a real server through the SDK (`landing-client`) and reads files
 //! through their owner (`landing-recording`): `info`, `detect` (a recorded frame or a PLY scan),
 //! `replay` (a recording as one stream, optionally written back as MCAP), `loadtest`, `render`
-//! (the sites over the camera image and from above, [`render`]) and `eval` (the evaluation of
-//! `landing-eval` against simulator ground truth). Exit codes are in [`exit`].
+//! (the sites over the camera image and from above, [`render`]), `eval` (the evaluation of
+//! `landing-eval` against simulator ground truth), `sites` (the fleet's catalog near a place) and
+//! `catalog import` (candidate roofs into the catalog's store, [`catalog`]). Exit codes are in
+//! [`exit`].
 //!
 //! ```
 //! # #[tokio::main(flavor = "current_thread")] async fn main() {
@@ -19,6 +21,7 @@
 #![forbid(unsafe_code)]
 
 pub mod args;
+pub mod catalog;
 pub mod commands;
 pub mod eval;
 pub mod loadtest;

@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use landing_proto::v1::landing_service_client::LandingServiceClient;
 use landing_proto::v1::{
     DetectLandingSitesRequest, Frame, FrameResult, FusionOptions, GetServiceInfoRequest,
-    OverflowPolicy, PipelineOptions, ServiceInfo, StreamLandingSitesRequest,
-    StreamLandingSitesResponse,
+    OverflowPolicy, PipelineOptions, SearchLandingSitesRequest, SearchLandingSitesResponse,
+    ServiceInfo, StreamLandingSitesRequest, StreamLandingSitesResponse,
 };
 use tokio::sync::{Semaphore, mpsc};
 use tokio_stream::Stream;
@@ -135,6 +135,26 @@ impl LandingClient {
                 req.set_timeout(t);
             }
             async move { client.get_service_info(req).await }
+        })
+        .await
+    }
+
+    /// One page of the fleet's landing-site catalog near a place ([`crate::SiteSearch`] builds
+    /// the request), retried on `UNAVAILABLE` as the [`RetryPolicy`] allows. A bad field is
+    /// [`ClientError::Status`] with `INVALID_ARGUMENT` naming it; a server whose catalog is off
+    /// or whose database is down answers `UNAVAILABLE`. Every site found is a candidate for a
+    /// drone to confirm with its own stream, never a clearance to land.
+    pub async fn search_landing_sites(
+        &self,
+        request: impl Into<SearchLandingSitesRequest>,
+    ) -> Result<SearchLandingSitesResponse, ClientError> {
+        let request = request.into();
+        self.with_retries(|mut client, timeout| {
+            let mut req = tonic::Request::new(request.clone());
+            if let Some(t) = timeout {
+                req.set_timeout(t);
+            }
+            async move { client.search_landing_sites(req).await }
         })
         .await
     }

@@ -5,7 +5,10 @@
 //! `UNAVAILABLE`/`RESOURCE_EXHAUSTED`, honouring the server's `RetryInfo`), or streams frames with
 //! [`LandingClient::open_stream`] and reads one [`StreamItem`] per frame, whose
 //! [`FrameOutcome`] is a result, an error (with the decoded `BadRequest` field violations), or a
-//! skip. Frames are built from raw buffers with [`PointCloudBuilder`], [`camera_image`] and
+//! skip. The fleet's landing-site catalog is searched by place with
+//! [`LandingClient::search_landing_sites`] ([`SiteSearch`] builds the request); what it returns is
+//! a candidate for a drone to confirm with its own stream, never a clearance to land.
+//! Frames are built from raw buffers with [`PointCloudBuilder`], [`camera_image`] and
 //! [`FrameBuilder`]. The wire types are the generated `landing_proto::v1` messages, re-exported as
 //! [`v1`], with accessors for the common reads of an answer ([`v1::FrameResult::best`],
 //! [`v1::LandingSite::shell`], [`v1::LandingSite::holes`], [`v1::LandingSite::center_xyz`],
@@ -97,6 +100,7 @@ mod config;
 mod error;
 mod frame;
 mod outcome;
+mod search;
 
 pub use client::{FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig};
 pub use config::{ClientConfig, DEFAULT_SERVER, RetryPolicy, TlsConfig};
@@ -110,3 +114,4 @@ pub use outcome::{
     FieldViolation, FrameError, FrameOutcome, StreamItem, code_label, duration_from_proto,
 };
 pub use prost::bytes::Bytes;
+pub use search::SiteSearch;

@@ -166,6 +166,7 @@ fn main() {
         .build()
         .unwrap();
     let mut config = Config::default();
+    config.catalog.enabled = false;
     match model_files() {
         Some((model, ort)) => {
             config.segmentation.model_path = model;

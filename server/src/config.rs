@@ -23,6 +23,156 @@ pub struct Config {
     pub tls: TlsConfig,
     pub log: LogConfig,
     pub fusion: FusionConfig,
+    pub catalog: CatalogConfig,
+}
+
+/// `[catalog]`: the fleet's landing-site catalog, fed by fused streams whose frames carry a
+/// geodetic origin and searched with `SearchLandingSites`. On by default with one SQLite file
+/// (`path`), which needs no set-up; `url` (a `postgres://` URL, from a Secret through
+/// `LANDING__CATALOG__URL`) selects a PostgreSQL + PostGIS database that several replicas
+/// share, and wins over `path`. A store that cannot be opened does not stop the server: frames
+/// are answered, writes are counted and dropped, searches answer UNAVAILABLE, and opening is
+/// retried every `retry_interval_s`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CatalogConfig {
+    /// Off: nothing is recorded and `SearchLandingSites` answers UNAVAILABLE.
+    pub enabled: bool,
+    /// The SQLite file (created, with its directory, when missing); relative to the working
+    /// directory.
+    pub path: PathBuf,
+    /// `postgres://user:password@host:port/database`; "" = the SQLite file at `path`.
+    pub url: String,
+    /// Observations waiting to be written; when full, the oldest is dropped (counted).
+    pub queue_capacity: u32,
+    /// Most observations written in one transaction.
+    pub batch_max: u32,
+    /// The writer waits at most this long to gather a batch, seconds.
+    pub flush_interval_s: f64,
+    /// A fused stream reports what it saw at most this often, and when it ends, seconds.
+    pub observe_interval_s: f64,
+    /// A site is recorded only once this many consecutive answers of its stream found it, on
+    /// ground the cameras resolved.
+    pub min_frames: u32,
+    /// Sites last confirmed longer ago are not returned unless a search asks (`max_age`),
+    /// seconds.
+    pub max_age_s: f64,
+    /// Sites last confirmed longer ago are deleted, seconds.
+    pub retention_s: f64,
+    /// How often expired sites are deleted, seconds.
+    pub expire_interval_s: f64,
+    /// How often a store that could not be opened, or a failed write, is tried again, seconds.
+    pub retry_interval_s: f64,
+}
+
+impl Default for CatalogConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            path: "data/catalog.sqlite".into(),
+            url: String::new(),
+            queue_capacity: 1024,
+            batch_max: 64,
+            flush_interval_s: 1.0,
+            observe_interval_s: 5.0,
+            min_frames: 3,
+            max_age_s: landing_catalog::DEFAULT_MAX_AGE.as_secs_f64(),
+            retention_s: 30.0 * 24.0 * 3600.0,
+            expire_interval_s: 600.0,
+            retry_interval_s: 5.0,
+        }
+    }
+}
+
+impl CatalogConfig {
+    /// Where the catalog lives: `url` when set, else `path`; `None` when the catalog is off.
+    pub fn location(&self) -> Result<Option<landing_catalog::Location>, Error> {
+        if !self.enabled {
+            return Ok(None);
+        }
+        let (key, value) = if self.url.trim().is_empty() {
+            ("catalog.path", self.path.to_string_lossy().into_owned())
+        } else {
+            ("catalog.url", self.url.clone())
+        };
+        let location = landing_catalog::Location::parse(&value, key)
+            .map_err(|e| Error::config(key, e.to_string()))?;
+        if key == "catalog.url" && !matches!(location, landing_catalog::Location::Postgres(_)) {
+            return Err(Error::config(
+                key,
+                "not a postgres:// or postgresql:// URL (a SQLite file goes in catalog.path)",
+            ));
+        }
+        Ok(Some(location))
+    }
+
+    fn validate(&self) -> Result<(), Error> {
+        self.location()?;
+        in_range(
+            "catalog.queue_capacity",
+            self.queue_capacity,
+            1..=1_000_000,
+            "1..=1000000",
+        )?;
+        in_range("catalog.batch_max", self.batch_max, 1..=10_000, "1..=10000")?;
+        in_range("catalog.min_frames", self.min_frames, 1..=1000, "1..=1000")?;
+        let day = 24.0 * 3600.0;
+        for (key, value, range, shown) in [
+            (
+                "catalog.flush_interval_s",
+                self.flush_interval_s,
+                0.001..=3600.0,
+                "0.001..=3600 seconds",
+            ),
+            (
+                "catalog.observe_interval_s",
+                self.observe_interval_s,
+                0.0..=3600.0,
+                "0..=3600 seconds",
+            ),
+            (
+                "catalog.max_age_s",
+                self.max_age_s,
+                1.0..=3650.0 * day,
+                "1 second..=3650 days",
+            ),
+            (
+                "catalog.retention_s",
+                self.retention_s,
+                1.0..=3650.0 * day,
+                "1 second..=3650 days",
+            ),
+            (
+                "catalog.expire_interval_s",
+                self.expire_interval_s,
+                1.0..=day,
+                "1..=86400 seconds",
+            ),
+            (
+                "catalog.retry_interval_s",
+                self.retry_interval_s,
+                0.01..=3600.0,
+                "0.01..=3600 seconds",
+            ),
+        ] {
+            in_range(key, value, range, shown)?;
+        }
+        if self.retention_s < self.max_age_s {
+            return Err(Error::config(
+                "catalog.retention_s",
+                format!(
+                    "{} s is shorter than catalog.max_age_s = {} s: sites would be deleted before they age out",
+                    self.retention_s, self.max_age_s
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// `max_age_s` as a duration.
+    pub fn max_age(&self) -> std::time::Duration {
+        std::time::Duration::from_secs_f64(self.max_age_s)
+    }
 }
 
 /// `[fusion]`: the defaults of streams that ask for approach fusion (`FusionOptions`); a stream
@@ -479,6 +629,7 @@ impl Config {
         self.auth.validate()?;
         self.tls.validate()?;
         self.fusion.validate()?;
+        self.catalog.validate()?;
         self.log.validate()
     }
 
@@ -871,6 +1022,15 @@ mod tests {
                 "fusion.max_pixel_footprint_m",
             ),
             ("[log]\nfilter = \"[[[\"\n", "log.filter"),
+            ("[catalog]\nqueue_capacity = 0\n", "catalog.queue_capacity"),
+            ("[catalog]\nurl = \"mysql://db/catalog\"\n", "catalog.url"),
+            ("[catalog]\npath = \" \"\n", "catalog.path"),
+            ("[catalog]\nretention_s = 60.0\n", "catalog.retention_s"),
+            ("[catalog]\nmin_frames = 0\n", "catalog.min_frames"),
+            (
+                "[catalog]\nflush_interval_s = -1.0\n",
+                "catalog.flush_interval_s",
+            ),
         ];
         for (i, (text, key)) in cases.into_iter().enumerate() {
             let path = write(&format!("bad{i}.toml"), text);

@@ -58,6 +58,10 @@ pub enum Error {
     /// The server is draining for shutdown and takes no new frames.
     #[error("the server is shutting down")]
     ShuttingDown,
+    /// The landing-site catalog cannot answer: it is off (`catalog.enabled = false`), its
+    /// database cannot be reached, or it holds data this build cannot read.
+    #[error("the landing-site catalog is unavailable: {0}")]
+    CatalogUnavailable(String),
     /// No or wrong bearer token.
     #[error("missing or invalid bearer token")]
     Unauthenticated,
@@ -103,6 +107,24 @@ impl Error {
                 path,
                 reason: other.to_string(),
             },
+        }
+    }
+}
+
+impl From<landing_catalog::Error> for Error {
+    /// A bad search field stays the caller's (named as the request names it); every storage
+    /// failure makes the catalog unavailable.
+    fn from(e: landing_catalog::Error) -> Self {
+        match e {
+            landing_catalog::Error::InvalidArgument { field, reason } => {
+                Self::invalid(field, reason)
+            }
+            landing_catalog::Error::Storage { .. } | landing_catalog::Error::Corrupt { .. } => {
+                Self::CatalogUnavailable(e.to_string())
+            }
+            // The catalog's error is #[non_exhaustive] in another crate: a failure it adds later
+            // is a storage one until it is told apart here.
+            _ => Self::CatalogUnavailable(e.to_string()),
         }
     }
 }

@@ -4,7 +4,11 @@
 //! Main types and entry points:
 //! - [`Config`] — the TOML/env/flag configuration ([`Config::load`], [`Config::default`]), with
 //!   public fields mirroring the file's sections (`server`, `pipeline`, `segmentation`, `auth`,
-//!   `tls`, `log`). Validated before anything binds.
+//!   `tls`, `log`, `fusion`, `catalog`). Validated before anything binds.
+//! - The fleet's landing-site catalog (`[catalog]`, on by default with `data/catalog.sqlite`):
+//!   fused streams whose frames carry a geodetic origin feed it through a bounded queue that the
+//!   frame path never waits on, and `SearchLandingSites` reads it; tests that start servers turn
+//!   it off or give it a file of their own.
 //! - [`start`] → [`RunningServer`] (`addr`, `metrics_addr`, [`RunningServer::shutdown`]) and
 //!   [`serve`] (runs until a shutdown future resolves): the server with health, reflection, auth,
 //!   TLS, metrics and graceful drain, on a listener the caller bound (use `127.0.0.1:0` in tests).
@@ -35,6 +39,7 @@
 //!
 //! let mut config = Config::default();
 //! config.segmentation.enabled = false; // no model file needed
+//! config.catalog.enabled = false; // no catalog file written
 //! config.server.metrics_listen = "127.0.0.1:0".into();
 //! let runtime = tokio::runtime::Runtime::new().unwrap();
 //! runtime.block_on(async {
@@ -71,6 +76,7 @@
 #![forbid(unsafe_code)]
 
 mod auth;
+mod catalog;
 pub mod cli;
 pub mod config;
 pub mod convert;

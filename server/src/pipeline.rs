@@ -20,7 +20,9 @@ pub use crate::frame::{
 use crate::segmentation::{self, Judged, PointView, Segmenter};
 use landing_geometry::geodetic::{Geodetic, enu_to_geodetic};
 
+mod evidence;
 mod fused;
+pub use evidence::{Evidence, NotCatalogued, SEEN_CELL_M, rectangles};
 pub use fused::run_fused;
 
 /// Time spent in each step; `None` for steps that did not run.
@@ -98,6 +100,9 @@ pub struct FrameOutput {
     pub timings: StageTimings,
     /// What a fused stream's answer came from; `None` for a frame judged alone.
     pub fusion: Option<FusionSummary>,
+    /// What a fused stream's answer tells the fleet's catalog, or why nothing; `None` for a frame
+    /// judged alone.
+    pub catalog: Option<Result<Evidence, NotCatalogued>>,
 }
 
 /// The map a fused answer came from (`landing.v1.FusionSummary`).
@@ -418,6 +423,7 @@ fn locate(
         triangle_count: detection.triangle_count,
         timings,
         fusion: None,
+        catalog: None,
     })
 }
 

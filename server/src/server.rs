@@ -17,6 +17,7 @@ use tonic::transport::server::Router;
 use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
 
 use crate::auth::Auth;
+use crate::catalog::Catalog;
 use crate::config::{Config, read_tokens};
 use crate::limit::RequestLimit;
 use crate::live::LiveView;
@@ -124,6 +125,15 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .map(|s| s.model_info().sha256)
         .unwrap_or_default();
     let metrics = Metrics::new(&model_sha256);
+    let model_id = pipeline
+        .segmenter
+        .as_ref()
+        .map(|s| {
+            let m = s.model_info();
+            format!("{}@{}", m.name, m.sha256.get(..12).unwrap_or(&m.sha256))
+        })
+        .unwrap_or_default();
+    let catalog = Catalog::start(&config.catalog, model_id, metrics.clone())?;
     let metrics_listener = match config.metrics_addr()? {
         Some(a) => Some(
             TcpListener::bind(a)
@@ -159,6 +169,7 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         fusion: config.fusion.params(),
         draining: drain_rx,
         live: live.clone(),
+        catalog: catalog.clone(),
     };
     let (health_reporter, router) = router(&config, service, tokens, tls).await?;
 
@@ -178,6 +189,7 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
             drain: drain_tx,
             metrics_stop: metrics_stop_tx,
             live,
+            catalog,
             grace: Duration::from_secs_f64(config.server.shutdown_grace_s),
         },
     };
@@ -266,6 +278,7 @@ struct Stopping {
     drain: watch::Sender<bool>,
     metrics_stop: oneshot::Sender<()>,
     live: Option<Arc<LiveView>>,
+    catalog: Option<Catalog>,
     grace: Duration,
 }
 
@@ -327,14 +340,21 @@ impl Stopping {
         let _ = self.drain.send(true);
     }
 
-    /// Stops the metrics endpoint and the live view.
+    /// Stops the metrics endpoint and the live view, and writes what the catalog has queued
+    /// (the streams have ended: their last observations are in).
     async fn side_services(self) {
         let _ = self.metrics_stop.send(());
         if let Some(live) = &self.live {
             live.stop().await;
         }
+        if let Some(catalog) = &self.catalog {
+            catalog.stop(CATALOG_STOP).await;
+        }
     }
 }
+
+/// How long the catalog's writer gets to write what is queued when the server stops.
+const CATALOG_STOP: Duration = Duration::from_secs(10);
 
 /// A reflection builder describing everything served: the landing API, health and both
 /// reflection versions (each version lists the other too, since both are served).

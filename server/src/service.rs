@@ -11,6 +11,8 @@ use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
 use crate::auth::Arrived;
+use crate::catalog::Catalog;
+use crate::catalog::search::{SearchRequest, response};
 use crate::convert;
 use crate::live::LiveView;
 use crate::status::{to_rpc_status, to_status};
@@ -31,6 +33,8 @@ pub(crate) struct LandingService {
     pub draining: watch::Receiver<bool>,
     /// The Foxglove live view, when `server.foxglove_listen` is set.
     pub live: Option<Arc<LiveView>>,
+    /// The fleet's landing-site catalog, unless `catalog.enabled` is false.
+    pub catalog: Option<Catalog>,
 }
 
 impl LandingService {
@@ -151,11 +155,12 @@ impl v1::landing_service_server::LandingService for LandingService {
         let inbound = request.into_inner();
         let dispatcher = self.dispatcher.clone();
         dispatcher.metrics.streams(1.0);
+        let feed = self.catalog.as_ref().map(Catalog::feed);
         tokio::spawn(stream::read_frames(
             session, inbound, cancel_rx, pending_tx, broken_tx,
         ));
         tokio::spawn(async move {
-            stream::write_answers(pending_rx, out_tx, broken_rx, cancel_tx).await;
+            stream::write_answers(pending_rx, out_tx, broken_rx, cancel_tx, feed).await;
             dispatcher.metrics.streams(-1.0);
         });
         Ok(Response::new(ReceiverStream::new(out_rx)))
@@ -181,6 +186,27 @@ impl v1::landing_service_server::LandingService for LandingService {
             max_request_bytes: self.max_request_bytes,
             default_fusion: Some(convert::default_fusion(&self.fusion)),
         }))
+    }
+
+    async fn search_landing_sites(
+        &self,
+        request: Request<v1::SearchLandingSitesRequest>,
+    ) -> Result<Response<v1::SearchLandingSitesResponse>, Status> {
+        let Some(catalog) = self.catalog.clone() else {
+            let off = crate::Error::CatalogUnavailable("catalog.enabled is false here".into());
+            return Err(to_status(&off));
+        };
+        let query = landing_catalog::SearchQuery::try_from(SearchRequest {
+            request: request.get_ref(),
+            default_max_age: catalog.max_age(),
+        })
+        .map_err(|e| to_status(&e))?;
+        // The store blocks on its database: off the async runtime.
+        let page = tokio::task::spawn_blocking(move || catalog.search(&query))
+            .await
+            .map_err(|e| to_status(&crate::Error::Internal(format!("catalog search: {e}"))))?
+            .map_err(|e| to_status(&e))?;
+        Ok(Response::new(response(page)))
     }
 }
 

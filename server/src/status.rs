@@ -30,6 +30,8 @@ pub fn code_of(error: &Error) -> Code {
         Error::DeadlineExceeded => Code::DeadlineExceeded,
         Error::Cancelled => Code::Cancelled,
         Error::ShuttingDown => Code::Unavailable,
+        // Off, unreachable or unreadable: the caller may retry later, or ask another replica.
+        Error::CatalogUnavailable(_) => Code::Unavailable,
         Error::Unauthenticated => Code::Unauthenticated,
         Error::Internal(_) => Code::Internal,
         // Configuration, file and PLY errors come from the command line, never from a request;
@@ -168,6 +170,10 @@ mod tests {
             (Error::DeadlineExceeded, Code::DeadlineExceeded),
             (Error::Cancelled, Code::Cancelled),
             (Error::ShuttingDown, Code::Unavailable),
+            (
+                Error::CatalogUnavailable("not connected".into()),
+                Code::Unavailable,
+            ),
             (Error::Unauthenticated, Code::Unauthenticated),
             (Error::Internal("bug".into()), Code::Internal),
             (Error::config("server.listen", "bad"), Code::Internal),
@@ -218,6 +224,26 @@ mod tests {
         assert_eq!(rpc.details[0].type_url, BAD_REQUEST_TYPE_URL);
         let decoded = rpc::BadRequest::decode(rpc.details[0].value.as_slice()).unwrap();
         assert_eq!(decoded.field_violations[1].field, "options.min_normal_dot");
+    }
+
+    #[test]
+    fn catalog_errors_name_the_field_or_the_catalog() {
+        let bad = Error::from(landing_catalog::Error::invalid(
+            "center.latitude_deg",
+            "91 is not a latitude",
+        ));
+        let status = to_status(&bad);
+        assert_eq!(status.code(), Code::InvalidArgument);
+        let details = status.get_error_details();
+        let violations = &details.bad_request().unwrap().field_violations;
+        assert_eq!(violations[0].field, "center.latitude_deg");
+        let down = Error::from(landing_catalog::Error::Corrupt {
+            backend: "sqlite",
+            what: "a newer schema".into(),
+        });
+        let status = to_status(&down);
+        assert_eq!(status.code(), Code::Unavailable);
+        assert!(status.message().contains("catalog"), "{}", status.message());
     }
 
     #[test]

@@ -200,6 +200,7 @@ impl Metrics {
                 "landing_live_view_dropped_total",
                 "Frames the live view dropped, oldest first, because its viewers fell behind."
             );
+            describe_catalog();
             metrics::describe_gauge!(
                 "landing_build_info",
                 "Always 1; the labels name the server version and the SHA-256 of the segmentation model file (\"\" without a model)."
@@ -238,6 +239,7 @@ impl Metrics {
             ] {
                 metrics::counter!(counter).absolute(0);
             }
+            register_catalog();
             metrics::gauge!(
                 "landing_build_info",
                 "version" => env!("CARGO_PKG_VERSION"),
@@ -302,11 +304,146 @@ impl Metrics {
         self.with(|| metrics::counter!("landing_live_view_dropped_total").increment(1));
     }
 
+    /// Counts a fused frame by what it gave the catalog (`catalogued`, `no_geodetic_origin`,
+    /// `unresolvable`).
+    pub fn catalog_frame(&self, outcome: &'static str) {
+        self.with(|| {
+            metrics::counter!("landing_catalog_frames_total", "outcome" => outcome).increment(1);
+        });
+    }
+
+    /// Sets the catalog's write-queue depth.
+    pub fn catalog_queue(&self, depth: usize) {
+        self.with(|| metrics::gauge!("landing_catalog_queue_depth").set(depth as f64));
+    }
+
+    /// Counts observations dropped unwritten (the queue was full, or the store refused them).
+    pub fn catalog_dropped(&self, observations: usize) {
+        self.with(|| {
+            metrics::counter!("landing_catalog_dropped_total").increment(observations as u64);
+        });
+    }
+
+    /// Counts a batch written and what it did to the stored sites.
+    pub fn catalog_written(&self, report: &landing_catalog::ApplyReport) {
+        self.with(|| {
+            metrics::counter!("landing_catalog_writes_total").increment(report.observations);
+            for (change, n) in [
+                ("inserted", report.inserted),
+                ("updated", report.updated),
+                ("withdrawn", report.withdrawn),
+                ("merged", report.merged),
+                ("dropped_stale", report.dropped_stale),
+            ] {
+                metrics::counter!("landing_catalog_site_changes_total", "change" => change)
+                    .increment(n);
+            }
+        });
+    }
+
+    /// Counts a write (or an attempt to open the store) that failed.
+    pub fn catalog_write_failed(&self) {
+        self.with(|| metrics::counter!("landing_catalog_write_failures_total").increment(1));
+    }
+
+    /// Sets the stored-records gauges and whether the store is open.
+    pub fn catalog_sites(&self, counts: &landing_catalog::Counts) {
+        self.with(|| {
+            metrics::gauge!("landing_catalog_sites", "kind" => "site").set(counts.confirmed as f64);
+            metrics::gauge!("landing_catalog_sites", "kind" => "candidate")
+                .set(counts.candidates as f64);
+        });
+    }
+
+    /// Sets whether the catalog's store is open.
+    pub fn catalog_connected(&self, connected: bool) {
+        self.with(|| {
+            metrics::gauge!("landing_catalog_connected").set(f64::from(u8::from(connected)))
+        });
+    }
+
+    /// Records one search's time in the store.
+    pub fn catalog_query(&self, took: Duration) {
+        self.with(|| {
+            metrics::histogram!("landing_catalog_query_seconds").record(took.as_secs_f64())
+        });
+    }
+
     /// The Prometheus text exposition of every metric.
     pub fn render(&self) -> String {
         self.handle.run_upkeep();
         self.handle.render()
     }
+}
+
+/// The catalog's metrics' help texts (inside [`Metrics::describe`]'s recorder).
+fn describe_catalog() {
+    metrics::describe_counter!(
+        "landing_catalog_frames_total",
+        "Fused frames by what they gave the landing-site catalog: catalogued, no_geodetic_origin (answered, not catalogued), unresolvable (no camera classes, or max_pixel_footprint_m = 0)."
+    );
+    metrics::describe_counter!(
+        "landing_catalog_writes_total",
+        "Observations written to the catalog."
+    );
+    metrics::describe_counter!(
+        "landing_catalog_write_failures_total",
+        "Catalog writes (and attempts to open its store) that failed; they are retried."
+    );
+    metrics::describe_counter!(
+        "landing_catalog_dropped_total",
+        "Observations dropped unwritten, oldest first: the write queue was full (catalog.queue_capacity), or the store refused them."
+    );
+    metrics::describe_counter!(
+        "landing_catalog_site_changes_total",
+        "What written observations did to stored sites: inserted, updated, withdrawn, merged, dropped_stale."
+    );
+    metrics::describe_gauge!(
+        "landing_catalog_queue_depth",
+        "Observations waiting to be written."
+    );
+    metrics::describe_gauge!(
+        "landing_catalog_sites",
+        "Records in the catalog, by kind (site, candidate)."
+    );
+    metrics::describe_gauge!(
+        "landing_catalog_connected",
+        "1 when the catalog's store is open, 0 while it is off or being retried."
+    );
+    metrics::describe_histogram!(
+        "landing_catalog_query_seconds",
+        metrics::Unit::Seconds,
+        "Time SearchLandingSites spends in the catalog's store."
+    );
+}
+
+/// The catalog's series, at 0 (inside [`Metrics::register`]'s recorder).
+fn register_catalog() {
+    for outcome in ["catalogued", "no_geodetic_origin", "unresolvable"] {
+        metrics::counter!("landing_catalog_frames_total", "outcome" => outcome).absolute(0);
+    }
+    for change in [
+        "inserted",
+        "updated",
+        "withdrawn",
+        "merged",
+        "dropped_stale",
+    ] {
+        metrics::counter!("landing_catalog_site_changes_total", "change" => change).absolute(0);
+    }
+    for counter in [
+        "landing_catalog_writes_total",
+        "landing_catalog_write_failures_total",
+        "landing_catalog_dropped_total",
+    ] {
+        metrics::counter!(counter).absolute(0);
+    }
+    for kind in ["site", "candidate"] {
+        metrics::gauge!("landing_catalog_sites", "kind" => kind).set(0.0);
+    }
+    metrics::gauge!("landing_catalog_queue_depth").set(0.0);
+    metrics::gauge!("landing_catalog_connected").set(0.0);
+    let _ = metrics::histogram!("landing_catalog_query_seconds");
 }
 
 impl Default for Metrics {

@@ -23,6 +23,7 @@ fn config() -> Config {
     c.server.metrics_listen = "127.0.0.1:0".into();
     c.server.shutdown_grace_s = 5.0;
     c.segmentation.enabled = false;
+    c.catalog.enabled = false;
     c
 }
 

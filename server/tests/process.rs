@@ -12,6 +12,8 @@ async fn sigterm_drains_and_exits_zero() {
     let mut child = Command::new(env!("CARGO_BIN_EXE_landing-server"))
         .args(["serve", "--listen", "127.0.0.1:0", "--metrics-listen", ""])
         .env("LANDING__SEGMENTATION__ENABLED", "false")
+        // No catalog file in the crate's directory.
+        .env("LANDING__CATALOG__ENABLED", "false")
         .env("LANDING__LOG__FORMAT", "json")
         .env("LANDING__SERVER__SHUTDOWN_GRACE_S", "5")
         .env_remove("RUST_LOG")
@@ -104,6 +106,7 @@ fn startup_log(env: &[(&str, &str)]) -> Vec<serde_json::Value> {
     command
         .args(["serve", "--listen", "127.0.0.1:0", "--metrics-listen", ""])
         .env("LANDING__SEGMENTATION__MODEL_PATH", model)
+        .env("LANDING__CATALOG__ENABLED", "false")
         .env("LANDING__LOG__FORMAT", "json")
         .env_remove("RUST_LOG")
         .env_remove("ORT_LOG")

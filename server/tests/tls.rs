@@ -112,6 +112,7 @@ fn certificates() -> PathBuf {
 fn config(dir: &Path, client_ca: bool) -> Config {
     let mut c = Config::default();
     c.segmentation.enabled = false;
+    c.catalog.enabled = false;
     c.server.metrics_listen = String::new();
     c.tls.cert_path = dir.join("server.pem");
     c.tls.key_path = dir.join("server.key");

@@ -8,7 +8,7 @@ use landing_server::telemetry::scrape;
 use crate::support::{TestServer, mode, scene, server_config};
 
 /// Every metric and its Prometheus type.
-const METRICS: [(&str, &str); 12] = [
+const METRICS: [(&str, &str); 21] = [
     ("landing_frames_total", "counter"),
     ("landing_frame_seconds", "histogram"),
     ("landing_stage_seconds", "histogram"),
@@ -21,6 +21,15 @@ const METRICS: [(&str, &str); 12] = [
     ("landing_live_view_frames_total", "counter"),
     ("landing_live_view_dropped_total", "counter"),
     ("landing_build_info", "gauge"),
+    ("landing_catalog_frames_total", "counter"),
+    ("landing_catalog_writes_total", "counter"),
+    ("landing_catalog_write_failures_total", "counter"),
+    ("landing_catalog_dropped_total", "counter"),
+    ("landing_catalog_site_changes_total", "counter"),
+    ("landing_catalog_queue_depth", "gauge"),
+    ("landing_catalog_sites", "gauge"),
+    ("landing_catalog_connected", "gauge"),
+    ("landing_catalog_query_seconds", "histogram"),
 ];
 const RPCS: [&str; 2] = ["unary", "stream"];
 const OUTCOMES: [&str; 8] = [

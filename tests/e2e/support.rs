@@ -52,6 +52,8 @@ pub fn server_config() -> Config {
     c.server.metrics_listen = String::new();
     c.server.shutdown_grace_s = 20.0;
     c.pipeline.geometry_workers = 2;
+    // The catalog's tests turn it on, with a file of their own.
+    c.catalog.enabled = false;
     match model_files() {
         Some((model, ort)) => {
             c.segmentation.enabled = true;

@@ -15,6 +15,7 @@ use landing_geometry::{CloudKind, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3};
 
+use super::evidence::{MapSurface, evidence};
 use super::{
     Classified, Decoded, Frame, FrameOptions, FrameOutput, FusionSummary, Located, Pipeline,
     StreamMap, classify, decode, locate, relative_to, to_local, to_world,
@@ -289,6 +290,15 @@ impl FusedFrame<'_> {
         let mode = classified.mode;
         let mut out = locate(self.frame, located, mode, classified.timings, self.start)?;
         out.fusion = Some(summary);
+        let surface = MapSurface {
+            points: &local,
+            origin: registered.origin,
+            classes: classes.as_deref(),
+            unresolved: &unresolved,
+            landable: &self.options.params.landable_classes,
+            resolving: map.params().max_pixel_footprint_m > 0.0,
+        };
+        out.catalog = Some(evidence(self.frame.geodetic_origin, &surface, &out.sites));
         Ok(out)
     }
 }

@@ -17,6 +17,7 @@ use tokio::sync::{mpsc, oneshot, watch};
 use tonic::{Status, Streaming};
 
 use super::{LandingService, never, stream_response};
+use crate::catalog::Feed;
 use crate::convert;
 use crate::live::LiveView;
 use crate::telemetry::Rpc;
@@ -182,12 +183,14 @@ pub(super) async fn read_frames(
 }
 
 /// Answers the frames in order, one response per frame, then the input's error if it broke;
-/// when the caller goes away, aborts what is left and tells the reader (`cancel`).
+/// when the caller goes away, aborts what is left and tells the reader (`cancel`). Each computed
+/// answer goes to the catalog's `feed`, which reports the stream's last one when dropped here.
 pub(super) async fn write_answers(
     mut pending: mpsc::Receiver<Pending>,
     out: mpsc::Sender<Result<v1::StreamLandingSitesResponse, Status>>,
     broken: oneshot::Receiver<Status>,
     cancel: watch::Sender<bool>,
+    mut feed: Option<Feed>,
 ) {
     let mut broken = broken;
     while let Some((sequence, mut job, shown)) = pending.recv().await {
@@ -201,6 +204,9 @@ pub(super) async fn write_answers(
                 break;
             }
         };
+        if let (Some(feed), Done::Computed(computed)) = (&mut feed, &done) {
+            feed.answered(computed);
+        }
         let response = stream_response(sequence, done);
         if let Some((live, frame)) = shown {
             live.show(frame, response.clone());

@@ -1,0 +1,305 @@
+//! What one stream tells the catalog: [`Feed`] reads each fused answer's evidence
+//! ([`crate::pipeline::Evidence`]) and every `catalog.observe_interval_s`, and when the stream
+//! ends, queues one observation of the stream's latest answer.
+//!
+//! # What is admitted
+//!
+//! The shipped model is imperfect (on one fresh set a fused stream put a dozen circles on a tarp
+//! the model called roof), so the catalog takes less than a fused answer shows, and says what it
+//! holds is a candidate for a drone to confirm, never a clearance:
+//!
+//! - only fused streams' answers (a frame judged alone is not catalogued), and only frames with a
+//!   geodetic origin (the others are answered as always, and counted as not catalogued);
+//! - a site only when every map point within its safe circle is landable ground that a camera
+//!   resolved (`fusion.max_pixel_footprint_m`; a stream that turns the rule off is not
+//!   catalogued), and only once `catalog.min_frames` consecutive answers of the stream found it
+//!   so (the same roof: overlapping circles within half a metre in height); its `frames` is that
+//!   count;
+//! - nothing from a stream before `catalog.min_frames` answers: a look that short neither adds nor
+//!   withdraws.
+//!
+//! # What the observation says it saw
+//!
+//! `seen` is what the latest answer's map resolved ([`crate::pipeline::Evidence::seen`]): every
+//! stored site whose circle meets it and that no admitted site confirms is withdrawn (the look
+//! found it blocked or found no site there), and what the map never resolved keeps its age. One
+//! exception keeps a site from flickering out of the catalog: the squares wholly inside the circle
+//! of a site this answer found on resolved ground but has not yet confirmed `min_frames` times are
+//! left out of `seen` (the look saw that ground free; it does not vouch for it yet).
+//!
+//! Every time is the server's clock when the answer was computed, not the frame's timestamp:
+//! recordings replayed today carry the time they were made, and drones' clocks drift; the
+//! catalog's ages are how long ago the fleet confirmed a site.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use landing_catalog::rule::SAME_ROOF_HEIGHT_M;
+use landing_catalog::{LatLon, Observation, ObservedSite, Polygon, Timestamp};
+
+use super::Catalog;
+use crate::pipeline::{Evidence, FrameOutput, NotCatalogued, SEEN_CELL_M, Site, rectangles};
+use landing_geometry::geodetic::{Geodetic, enu_to_geodetic};
+
+/// One stream's feed: dropped with the stream, when it queues the stream's last observation.
+pub(crate) struct Feed {
+    catalog: Catalog,
+    approach_id: String,
+    /// Consecutive catalogued answers since the stream (or its map) started.
+    answers: u32,
+    /// The previous answer's sites on resolved ground, with their streaks.
+    tracked: Vec<(Site, Streak)>,
+    /// The latest answer, not yet sent.
+    latest: Option<Latest>,
+    last_sent: Instant,
+}
+
+/// A catalogued answer, as the feed keeps it until it is sent.
+struct Latest {
+    at: Timestamp,
+    drone_id: String,
+    evidence: Evidence,
+    /// The answer's sites with their streaks (a run of 0: not on resolved ground).
+    sites: Vec<(Site, Streak)>,
+}
+
+/// How a site of the stream has been found.
+#[derive(Debug, Clone, Copy, Default)]
+struct Streak {
+    /// Consecutive answers that found it on resolved ground, this one included.
+    run: u32,
+    /// Those of them not yet counted in an observation the catalog was sent: a site's `frames`
+    /// in the catalog adds each answer once.
+    unreported: u32,
+}
+
+impl Feed {
+    pub fn new(catalog: Catalog) -> Self {
+        static APPROACHES: AtomicU64 = AtomicU64::new(0);
+        let n = APPROACHES.fetch_add(1, Ordering::Relaxed);
+        let approach_id = format!(
+            "{:x}-{}-{n}",
+            Timestamp::now().unix_ms(),
+            std::process::id()
+        );
+        Self {
+            catalog,
+            approach_id,
+            answers: 0,
+            tracked: Vec::new(),
+            latest: None,
+            last_sent: Instant::now(),
+        }
+    }
+
+    /// Reads one answer of the stream; queues an observation when one is due.
+    pub fn answered(&mut self, out: &FrameOutput) {
+        let Some(verdict) = &out.catalog else {
+            return; // judged alone: not a fused stream
+        };
+        let shared = &self.catalog.shared;
+        let evidence = match verdict {
+            Ok(e) => e,
+            Err(why) => {
+                shared.metrics.catalog_frame(match why {
+                    NotCatalogued::NoGeodeticOrigin => "no_geodetic_origin",
+                    NotCatalogued::Unresolvable => "unresolvable",
+                });
+                // Not consecutive any more.
+                self.answers = 0;
+                self.tracked.clear();
+                self.latest = None;
+                return;
+            }
+        };
+        shared.metrics.catalog_frame("catalogued");
+        let restarted = out.fusion.as_ref().is_some_and(|f| f.reset.is_some())
+            || self
+                .latest
+                .as_ref()
+                .is_some_and(|l| l.evidence.origin != evidence.origin);
+        if restarted {
+            self.answers = 0;
+            self.tracked.clear();
+        }
+        self.answers = self.answers.saturating_add(1);
+        let sites: Vec<(Site, Streak)> = out
+            .sites
+            .iter()
+            .zip(&evidence.resolved)
+            .map(|(site, &resolved)| {
+                let before = self
+                    .tracked
+                    .iter()
+                    .filter(|(t, _)| resolved && same_roof(t, site))
+                    .map(|(_, streak)| *streak)
+                    .max_by_key(|streak| streak.run)
+                    .unwrap_or_default();
+                let streak = if resolved {
+                    Streak {
+                        run: before.run + 1,
+                        unreported: before.unreported + 1,
+                    }
+                } else {
+                    Streak::default()
+                };
+                (site.clone(), streak)
+            })
+            .collect();
+        self.tracked = sites.iter().filter(|(_, s)| s.run > 0).cloned().collect();
+        self.latest = Some(Latest {
+            at: Timestamp::now(),
+            drone_id: out.drone_id.clone(),
+            evidence: evidence.clone(),
+            sites,
+        });
+        let interval = Duration::from_secs_f64(shared.config.observe_interval_s);
+        if self.last_sent.elapsed() >= interval {
+            self.send();
+        }
+    }
+
+    /// Queues the latest answer's observation, once the stream has looked long enough.
+    fn send(&mut self) {
+        let min_frames = self.catalog.shared.config.min_frames;
+        if self.answers < min_frames {
+            return;
+        }
+        let Some(latest) = self.latest.take() else {
+            return;
+        };
+        let observation = observation(
+            &latest,
+            min_frames,
+            &self.approach_id,
+            &self.catalog.shared.model_id,
+        );
+        // What was admitted is reported: the next observation counts only newer answers.
+        for (_, streak) in &mut self.tracked {
+            if streak.run >= min_frames {
+                streak.unreported = 0;
+            }
+        }
+        match observation.validate("observation") {
+            Ok(()) => self.catalog.submit(observation),
+            Err(e) => {
+                tracing::warn!(error = %e, "an observation the catalog would refuse; dropped");
+                self.catalog.shared.metrics.catalog_dropped(1);
+            }
+        }
+        self.last_sent = Instant::now();
+    }
+}
+
+impl Drop for Feed {
+    /// The stream ended: its latest answer is what the approach saw last.
+    fn drop(&mut self) {
+        self.send();
+    }
+}
+
+/// Whether two answers' sites are the same roof (the catalog's rule: overlapping safe circles,
+/// plane heights within [`SAME_ROOF_HEIGHT_M`]).
+fn same_roof(a: &Site, b: &Site) -> bool {
+    let d = (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]);
+    d < a.safe_radius_m + b.safe_radius_m
+        && (a.plane_height_m - b.plane_height_m).abs() <= SAME_ROOF_HEIGHT_M
+}
+
+/// The observation of `latest`: its sites found by at least `min_frames` consecutive answers
+/// (valid in WGS-84) and its seen area less the squares wholly inside the circles of sites not
+/// admitted yet.
+fn observation(latest: &Latest, min_frames: u32, approach_id: &str, model_id: &str) -> Observation {
+    let origin = latest.evidence.origin;
+    let pending: Vec<&Site> = latest
+        .sites
+        .iter()
+        .filter(|(_, s)| s.run > 0 && s.run < min_frames)
+        .map(|(s, _)| s)
+        .collect();
+    let squares = latest
+        .evidence
+        .seen
+        .iter()
+        .copied()
+        .filter(|&square| !pending.iter().any(|s| square_inside(square, s)));
+    let seen = rectangles(squares)
+        .into_iter()
+        .map(|[x0, y0, x1, y1]| {
+            let corner = |x: f64, y: f64| lat_lon(origin, [x, y, 0.0]);
+            Polygon::new(
+                vec![
+                    corner(x0, y0),
+                    corner(x1, y0),
+                    corner(x1, y1),
+                    corner(x0, y1),
+                ],
+                vec![],
+            )
+        })
+        .collect();
+    let sites = latest
+        .sites
+        .iter()
+        .filter(|(_, s)| s.run >= min_frames)
+        .map(|(site, s)| observed(origin, site, s.unreported.max(1)))
+        .filter(|s| {
+            let alone = Observation {
+                sites: vec![s.clone()],
+                ..Default::default()
+            };
+            alone.validate("site").is_ok()
+        })
+        .collect();
+    Observation {
+        t: latest.at,
+        drone_id: truncated(&latest.drone_id),
+        approach_id: approach_id.to_owned(),
+        model_id: truncated(model_id),
+        seen,
+        sites,
+    }
+}
+
+/// Whether the seen square lies wholly inside the site's safe circle.
+fn square_inside((i, j): (i64, i64), site: &Site) -> bool {
+    let r2 = site.safe_radius_m.powi(2);
+    [(i, j), (i + 1, j), (i, j + 1), (i + 1, j + 1)]
+        .into_iter()
+        .all(|(x, y)| {
+            let dx = x as f64 * SEEN_CELL_M - site.center[0];
+            let dy = y as f64 * SEEN_CELL_M - site.center[1];
+            dx * dx + dy * dy <= r2
+        })
+}
+
+/// A site of the answer in WGS-84: its plane height is the centre's height above the ellipsoid.
+fn observed(origin: Geodetic, s: &Site, frames: u32) -> ObservedSite {
+    let ring = |r: &[[f64; 3]]| r.iter().map(|p| lat_lon(origin, *p)).collect::<Vec<_>>();
+    let center = enu_to_geodetic(origin, s.center);
+    ObservedSite {
+        polygon: Polygon::new(ring(&s.shell), s.holes.iter().map(|h| ring(h)).collect()),
+        center: LatLon::new(center.latitude_deg, center.longitude_deg),
+        safe_radius_m: s.safe_radius_m,
+        plane_height_m: center.altitude_m,
+        frames,
+    }
+}
+
+fn lat_lon(origin: Geodetic, enu: [f64; 3]) -> LatLon {
+    let g = enu_to_geodetic(origin, enu);
+    LatLon::new(g.latitude_deg, g.longitude_deg)
+}
+
+/// An id cut to what the catalog keeps, on a character boundary.
+fn truncated(id: &str) -> String {
+    let mut end = id.len().min(MAX_ID_BYTES);
+    while !id.is_char_boundary(end) {
+        end -= 1;
+    }
+    id[..end].to_owned()
+}
+
+/// The longest id the catalog keeps, in bytes (the catalog's own limit, which it does not
+/// export; a longer one would make it refuse the whole batch).
+const MAX_ID_BYTES: usize = 256;
