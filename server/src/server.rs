@@ -119,20 +119,8 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         .local_addr()
         .context("read the listener's address")?;
     let pipeline = load_pipeline(&config)?;
-    let model_sha256 = pipeline
-        .segmenter
-        .as_ref()
-        .map(|s| s.model_info().sha256)
-        .unwrap_or_default();
+    let (model_sha256, model_id) = model_identity(&pipeline);
     let metrics = Metrics::new(&model_sha256);
-    let model_id = pipeline
-        .segmenter
-        .as_ref()
-        .map(|s| {
-            let m = s.model_info();
-            format!("{}@{}", m.name, m.sha256.get(..12).unwrap_or(&m.sha256))
-        })
-        .unwrap_or_default();
     let catalog = Catalog::start(&config.catalog, model_id, metrics.clone())?;
     let metrics_listener = match config.metrics_addr()? {
         Some(a) => Some(
@@ -201,6 +189,17 @@ pub async fn start(config: Config, listener: TcpListener) -> anyhow::Result<Runn
         shutdown: Some(stop_tx),
         task,
     })
+}
+
+/// The loaded model's SHA-256 (for `landing_build_info`) and the short id the catalog records
+/// with each site (`name@sha256[..12]`); empty without a model.
+fn model_identity(pipeline: &Pipeline) -> (String, String) {
+    let Some(segmenter) = &pipeline.segmenter else {
+        return Default::default();
+    };
+    let m = segmenter.model_info();
+    let id = format!("{}@{}", m.name, m.sha256.get(..12).unwrap_or(&m.sha256));
+    (m.sha256, id)
 }
 
 /// The bearer tokens `auth.tokens_file` lists, or `None` (no auth) when it is not set.
