@@ -64,6 +64,13 @@ pub struct SearchQuery {
 }
 
 impl SearchQuery {
+    /// Checks every field (and the page token) as a search would, without a store: the error
+    /// names the field. Lets a caller refuse a bad request before it knows whether a store is
+    /// there to ask.
+    pub fn validate(&self, now: Timestamp) -> Result<()> {
+        Resolved::new(self, now).map(|_| ())
+    }
+
     /// The first page of confirmed sites within `radius_m` of `center`, nearest first, no older
     /// than [`DEFAULT_MAX_AGE`], [`DEFAULT_PAGE_SIZE`] per page.
     pub fn new(center: LatLon, radius_m: f64) -> Self {

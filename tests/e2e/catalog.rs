@@ -232,7 +232,7 @@ async fn a_fused_approach_with_an_origin_fills_the_catalog_and_a_search_finds_it
 async fn malformed_searches_name_their_field() {
     let server = TestServer::with_config(catalog_config("malformed.sqlite")).await;
     let mut client = raw_client(&server).await;
-    // The store checks the fields: wait until the writer thread has opened it.
+    // Wait until the writer thread has opened the store, so the cases below meet a live catalog.
     let give_up = Instant::now() + Duration::from_secs(10);
     while let Err(status) = client
         .search_landing_sites(search_near(ORIGIN, 500.0))
@@ -368,6 +368,21 @@ async fn with_the_database_down_frames_are_answered_and_searches_are_unavailable
         .unwrap_err();
     assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
     assert!(status.message().contains("catalog"), "{}", status.message());
+    // A bad request is the caller's to fix, database or not.
+    let bad_center = v1::GeodeticPoint {
+        latitude_deg: 91.0,
+        ..ORIGIN
+    };
+    let status = client
+        .search_landing_sites(search_near(bad_center, 500.0))
+        .await
+        .unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
+    let details = status.get_error_details();
+    let violation = details
+        .bad_request()
+        .map(|b| b.field_violations[0].field.as_str());
+    assert_eq!(violation, Some("center.latitude_deg"), "{status:?}");
     let metrics = scrape(server.metrics_addr().unwrap()).await.unwrap();
     assert_eq!(value(&metrics, "landing_catalog_connected"), Some(0.0));
     assert!(value(&metrics, "landing_catalog_write_failures_total").unwrap() >= 1.0);
