@@ -583,7 +583,9 @@ def examples() -> tuple[list[str], int]:
 # Container recipes: what hadolint cannot know (agreement with the config and the manifests).
 
 ORT_VERSION = "1.31.1"
-ALLOWED_CONFIG_DIFFERENCES = {("auth", "tokens_file")}
+# Kubernetes adds the auth Secret; and its base runs several replicas (the HPA) with no storage
+# for a catalog yet, so the catalog is off there until a volume or PostGIS is given (issue 41).
+ALLOWED_CONFIG_DIFFERENCES = {("auth", "tokens_file"), ("catalog", "enabled")}
 DOCKERFILES = {"Dockerfile": "onnxruntime", "Dockerfile.gpu": "onnxruntime-gpu"}
 
 
@@ -640,14 +642,15 @@ def check_images() -> list[str]:
     if baked.get("segmentation", {}).get("ort_library", "") != "":
         problems.append("deploy/config/server.toml: segmentation.ort_library must be \"\" (the image sets ORT_DYLIB_PATH)")
 
-    # The image's config and the ConfigMap's differ on purpose only where Kubernetes adds a Secret.
+    # The image's config and the ConfigMap's differ on purpose only where ALLOWED_CONFIG_DIFFERENCES
+    # says why.
     cluster = tomllib.loads((DEPLOY / "k8s" / "base" / "server.toml").read_text())
     for section in sorted(set(baked) | set(cluster)):
         for key in sorted(set(baked.get(section, {})) | set(cluster.get(section, {}))):
             a, b = baked.get(section, {}).get(key), cluster.get(section, {}).get(key)
             if a != b and (section, key) not in ALLOWED_CONFIG_DIFFERENCES:
                 problems.append(f"{section}.{key} is {a!r} in deploy/config/server.toml but {b!r} in "
-                                "deploy/k8s/base/server.toml; only auth.tokens_file may differ")
+                                "deploy/k8s/base/server.toml; only auth.tokens_file and catalog.enabled may differ")
 
     ignore_text = (DEPLOY / "dockerignore").read_text()
     for copy_name in ("Dockerfile.dockerignore", "Dockerfile.gpu.dockerignore"):
