@@ -249,6 +249,11 @@ pub struct LoadtestArgs {
     /// (with the server's `[fusion]` defaults).
     #[arg(long)]
     pub fuse: bool,
+    /// The WGS-84 position of the recordings' world origin, `LAT,LON[,ALT]`, for frames that
+    /// carry none: fused streams then feed the server's landing-site catalog (its write path
+    /// under load).
+    #[arg(long, value_name = "LAT,LON[,ALT]")]
+    pub origin: Option<String>,
     #[command(flatten)]
     pub pipeline: PipelineArgs,
 }
@@ -580,13 +585,15 @@ async fn loadtest(
     {
         return Err(usage(format!("--rate {r} must be positive")));
     }
+    let origin = a.origin.as_deref().map(geodetic_origin).transpose()?;
     let mut frames = Vec::new();
     for r in &a.recordings {
-        frames.extend(
-            recorded_frames(r, &a.pipeline)?
-                .into_iter()
-                .map(|f| f.frame),
-        );
+        frames.extend(recorded_frames(r, &a.pipeline)?.into_iter().map(|mut f| {
+            if let Some(origin) = origin {
+                f.frame.geodetic_origin.get_or_insert(origin);
+            }
+            f.frame
+        }));
     }
     let client = connect(&cli.connection).await?;
     let config = LoadTestConfig {
