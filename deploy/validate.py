@@ -5,13 +5,15 @@ Used by deploy/check.sh; each subcommand exits non-zero with a message naming th
 at fault.
 
   validate.py manifests --out DIR
-      Renders the kustomize base, both overlays, and each overlay with every component (tls,
-      servicemonitor) through `kubectl kustomize`; validates every object against the Kubernetes
+      Renders the kustomize base, the cpu, gpu and fleet overlays, each overlay with its components
+      (COMPONENTS) and the GPU fleet through `kubectl kustomize`; validates every object against the Kubernetes
       JSON schemas (kubernetes-validate, strict: unknown fields are errors) for the oldest and
       newest Kubernetes versions supported; validates deploy/k8s/examples/*.yaml the same way; then
       checks what schemas cannot: security context, probes against the config's ports, drain
       grace against terminationGracePeriodSeconds, selectors against labels, references between
-      objects, the GPU overlay's resources. Writes, per render, the ConfigMap's server.toml and the
+      objects, the GPU overlay's resources, the catalog's storage (SQLite on a single-writer claim
+      with one replica and Recreate, or the fleet's PostgreSQL URL from a Secret), plaintext
+      passwords, the test PostGIS StatefulSet. Writes, per render, the ConfigMap's server.toml and the
       container's LANDING__* environment to DIR/<render>/ for `landing-server check-config`.
 
   validate.py config FILE...
