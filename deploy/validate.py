@@ -80,7 +80,8 @@ CATALOG_URL_ENV = "LANDING__CATALOG__URL"
 SINGLE_WRITER_ACCESS_MODES = {"ReadWriteOnce", "ReadWriteOncePod"}
 # scheme://user:password@ — a password written into a manifest.
 CREDENTIAL_URL = re.compile(r"[a-z][a-z0-9+.-]*://[^/\s:@]+:([^@\s/]+)@", re.I)
-SECRET_ENV_NAME = re.compile(r"PASSWORD|PASSWD|SECRET|TOKEN|CATALOG__URL", re.I)
+# Variable names that hold a secret itself (not a path to one: LANDING__AUTH__TOKENS_FILE is fine).
+SECRET_ENV_NAME = re.compile(r"(PASSWORD|PASSWD|_SECRET|_TOKEN|CATALOG__URL)$", re.I)
 PLACEHOLDER = "REPLACE-ME"
 
 # The server config contract (shared with server/src/config.rs): section -> key -> type.
