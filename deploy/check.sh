@@ -10,10 +10,12 @@
 #   3. images     the recipes agree with the config, the model, ONNX Runtime 1.31.1, dockerignore;
 #                 the GPU recipe's cargo flags resolve and turn on ort's `cuda` feature (cargo tree)
 #   4. contract   both server TOML files use only the config contract's sections, keys and types
-#   5. manifests  renders base, cpu, gpu, and cpu/gpu with every component (tls, servicemonitor,
-#                 networkpolicy) with
+#   5. manifests  renders base, cpu, gpu, fleet, cpu/gpu with every component (tls, servicemonitor,
+#                 networkpolicy), fleet with tls, servicemonitor and postgis, and gpu+fleet with
 #                 `kubectl kustomize`; strict schema validation for Kubernetes 1.30 and 1.37; policy
-#                 (security context, probes vs ports, drain grace, selectors, references, GPU)
+#                 (security context, probes vs ports, drain grace, selectors, references, GPU, the
+#                 catalog's storage: SQLite on a RWO claim with 1 replica and Recreate, or the fleet's
+#                 PostgreSQL URL from a Secret; no plaintext password in any manifest)
 #   6. selftest   breaks manifests and recipes one rule at a time: every check must fire
 #   7. build      release binaries landing-server and landing (cargo; a no-op when up to date)
 #   8. check-config  `landing-server check-config` accepts deploy/config/server.toml and the
@@ -24,14 +26,20 @@
 #                 replay samples/rooftops.mcap`, /metrics scraped, SIGTERM drains and exits 0;
 #                 then SIGTERM during a replay: every frame sent before the drain is answered
 #  10. cluster    the cpu render's ConfigMap (auth on): health without a token (the kubelet's
-#                 view), `landing info` without a token refused, replay with it; the tls render:
-#                 plaintext health fails, replay over TLS with the CA and the token works
+#                 view), `landing info` without a token refused, replay with it, `landing sites`
+#                 answered from the SQLite catalog; the tls render: plaintext health fails, replay
+#                 over TLS with the CA and the token works; the fleet render with its catalog URL on
+#                 a closed port (no database here): the server starts, frames are answered, and
+#                 `landing sites` answers UNAVAILABLE naming the catalog
 #
 # In-image paths and what replaces them on this machine (environment overrides only):
 #   /opt/landing/models/rooftop-segmentation.onnx  -> LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx
 #   ORT_DYLIB_PATH=/opt/onnxruntime/lib/...        -> ORT_DYLIB_PATH=.ort/libonnxruntime.so (scripts/setup-ort.sh)
 #   /var/run/secrets/landing/auth/tokens           -> LANDING__AUTH__TOKENS_FILE=<temp file with a token>
 #   /var/run/secrets/landing/tls/tls.{crt,key}     -> LANDING__TLS__{CERT,KEY}_PATH=<temp CA-signed pair>
+#   /var/lib/landing/catalog.sqlite (the PVC)      -> LANDING__CATALOG__PATH=<temp file>
+#   LANDING__CATALOG__URL from Secret landing-server-catalog-db
+#                                                  -> postgres://landing@127.0.0.1:<closed port>/landing
 # If port 50051 or 9464 is taken on this machine, serve moves to a free loopback port
 # (LANDING__SERVER__LISTEN / METRICS_LISTEN) and says so.
 #
@@ -163,6 +171,7 @@ local_env() {
   local line key value
   echo "LANDING__SEGMENTATION__MODEL_PATH=$root/models/rooftop-segmentation.onnx"
   echo "ORT_DYLIB_PATH=$root/.ort/libonnxruntime.so"
+  echo "LANDING__CATALOG__PATH=$work/catalog.sqlite"
   while IFS= read -r line; do
     key=${line%%=*}
     value=${line#*=}
@@ -172,6 +181,8 @@ local_env() {
       LANDING__TLS__CERT_PATH) echo "$key=$work/tls.crt" ;;
       LANDING__TLS__CLIENT_CA_PATH) echo "$key=$work/ca.crt" ;;
       LANDING__TLS__KEY_PATH) echo "$key=$work/tls.key" ;;
+      # No PostgreSQL here: a port nothing listens on (free_port's socket is closed again).
+      LANDING__CATALOG__URL) echo "$key=postgres://landing@127.0.0.1:$(free_port)/landing" ;;
       *) echo "$key=$value" ;;
     esac
   done < "$1"
@@ -275,7 +286,8 @@ stop_server() {
 
 serve() {
   local grpc_port=50051 metrics_port=9464 rc=0
-  serve_env=("LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx" "ORT_DYLIB_PATH=.ort/libonnxruntime.so")
+  serve_env=("LANDING__SEGMENTATION__MODEL_PATH=models/rooftop-segmentation.onnx" "ORT_DYLIB_PATH=.ort/libonnxruntime.so"
+    "LANDING__CATALOG__PATH=$work/serve-catalog.sqlite")
   if ! port_free "$grpc_port"; then
     grpc_port=$(free_port)
     serve_env+=("LANDING__SERVER__LISTEN=127.0.0.1:$grpc_port")
@@ -351,9 +363,9 @@ PY
 # The ConfigMaps as the pods run them (auth on; TLS with the tls component), with local stand-ins
 # for the Secrets and loopback ports (each pod has its own network namespace; this machine has one).
 cluster_configs() {
-  local rc=0 render envs grpc_port metrics_port
+  local rc=0 render envs grpc_port metrics_port catalog_near=40.7484,-73.9857
   make_stand_ins || { echo "openssl could not make a test certificate"; return 1; }
-  for render in cpu cpu+components; do
+  for render in cpu cpu+components fleet; do
     envs=$(mktemp -p "$work")
     cp "$work/renders/$render/env" "$envs"
     echo "LANDING__AUTH__TOKENS_FILE=in-image" >> "$envs"
@@ -377,6 +389,35 @@ cluster_configs() {
         echo "with the token: $(tail -n 1 "$work/auth.out")"
       else
         cat "$work/auth.out"; rc=1
+      fi
+      # The SQLite catalog on the claim's stand-in answers searches.
+      if "$bin_dir/landing" sites --near "$catalog_near" --radius 500 --server "http://$addr" --token deploy-check-token \
+        > "$work/sites.out" 2>&1; then
+        echo "landing sites (SQLite at the volume's stand-in): $(head -n 1 "$work/sites.out")"
+      else
+        cat "$work/sites.out"; rc=1
+      fi
+    elif [ "$render" = fleet ]; then
+      # Several replicas on one PostgreSQL; none runs here, so the URL points at a closed port. The
+      # catalog must not stop the server: health, frames as usual; searches UNAVAILABLE, naming it.
+      "$py" deploy/validate.py health "$addr" --service landing.v1.LandingService --timeout 120 || rc=1
+      if "$bin_dir/landing" replay samples/rooftops.mcap --server "http://$addr" --token deploy-check-token \
+        > "$work/fleet.out" 2>&1; then
+        echo "catalog database down, frames answered: $(tail -n 1 "$work/fleet.out")"
+      else
+        cat "$work/fleet.out"; rc=1
+      fi
+      "$bin_dir/landing" sites --near "$catalog_near" --radius 500 --server "http://$addr" --token deploy-check-token \
+        > "$work/fleet-sites.out" 2>&1
+      local sites_status=$?
+      if [ $sites_status -ne 0 ] && grep -q "unavailable" "$work/fleet-sites.out" && grep -q "catalog" "$work/fleet-sites.out"; then
+        echo "landing sites: exit $sites_status, $(grep -o 'the landing-site catalog is unavailable[^:]*' "$work/fleet-sites.out" | head -n 1)"
+      else
+        echo "landing sites with the catalog database down: exit $sites_status, expected UNAVAILABLE naming the catalog"
+        cat "$work/fleet-sites.out"; rc=1
+      fi
+      if grep -q "postgres://landing@" "$work/server-$render.log"; then
+        echo "the server log shows the catalog URL unredacted"; rc=1
       fi
     else
       # TLS: the port answers TCP (the component's probes), plaintext gRPC health does not (why the
@@ -414,7 +455,7 @@ if [ -z "${DEPLOY_CHECK_STATIC:-}" ]; then
   step "build: landing-server, landing (release)" build
   step "check-config: deploy config and every render's ConfigMap" check_config
   step "serve: deploy config serves samples/rooftops.mcap" serve
-  step "cluster configs: auth on, TLS component" cluster_configs
+  step "cluster configs: auth on, TLS component, fleet catalog" cluster_configs
 fi
 
 echo "deploy: $passed passed, $failed failed"

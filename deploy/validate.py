@@ -5,13 +5,15 @@ Used by deploy/check.sh; each subcommand exits non-zero with a message naming th
 at fault.
 
   validate.py manifests --out DIR
-      Renders the kustomize base, both overlays, and each overlay with every component (tls,
-      servicemonitor) through `kubectl kustomize`; validates every object against the Kubernetes
+      Renders the kustomize base, the cpu, gpu and fleet overlays, each overlay with its components
+      (COMPONENTS) and the GPU fleet through `kubectl kustomize`; validates every object against the Kubernetes
       JSON schemas (kubernetes-validate, strict: unknown fields are errors) for the oldest and
       newest Kubernetes versions supported; validates deploy/k8s/examples/*.yaml the same way; then
       checks what schemas cannot: security context, probes against the config's ports, drain
       grace against terminationGracePeriodSeconds, selectors against labels, references between
-      objects, the GPU overlay's resources. Writes, per render, the ConfigMap's server.toml and the
+      objects, the GPU overlay's resources, the catalog's storage (SQLite on a single-writer claim
+      with one replica and Recreate, or the fleet's PostgreSQL URL from a Secret), plaintext
+      passwords, the test PostGIS StatefulSet. Writes, per render, the ConfigMap's server.toml and the
       container's LANDING__* environment to DIR/<render>/ for `landing-server check-config`.
 
   validate.py config FILE...
@@ -61,8 +63,26 @@ KUBERNETES_VERSIONS = ("1.30.0", "1.37.0")
 CUSTOM_KINDS = {("monitoring.coreos.com/v1", "ServiceMonitor")}
 
 # The renders: name -> kustomization directory relative to deploy/k8s, plus components.
-OVERLAYS = ("cpu", "gpu")
-COMPONENTS = ("tls", "servicemonitor", "networkpolicy")
+OVERLAYS = ("cpu", "gpu", "fleet")
+# "<overlay>+components" adds these. The fleet's pods talk to PostgreSQL, so they get the test
+# database (postgis) instead of networkpolicy, which denies all egress.
+COMPONENTS = {
+    "cpu": ("tls", "servicemonitor", "networkpolicy"),
+    "gpu": ("tls", "servicemonitor", "networkpolicy"),
+    "fleet": ("tls", "servicemonitor", "postgis"),
+}
+# Further renders: (overlay, components). A GPU fleet is the gpu overlay with the fleet component.
+EXTRA_RENDERS = {"gpu+fleet": ("gpu", ("fleet",))}
+
+# The catalog (issue 41): SQLite on a PersistentVolumeClaim (one writer), or PostgreSQL + PostGIS
+# with the URL, password included, from a Secret.
+CATALOG_URL_ENV = "LANDING__CATALOG__URL"
+SINGLE_WRITER_ACCESS_MODES = {"ReadWriteOnce", "ReadWriteOncePod"}
+# scheme://user:password@ — a password written into a manifest.
+CREDENTIAL_URL = re.compile(r"[a-z][a-z0-9+.-]*://[^/\s:@]+:([^@\s/]+)@", re.I)
+# Variable names that hold a secret itself (not a path to one: LANDING__AUTH__TOKENS_FILE is fine).
+SECRET_ENV_NAME = re.compile(r"(PASSWORD|PASSWD|_SECRET|_TOKEN|CATALOG__URL)$", re.I)
+PLACEHOLDER = "REPLACE-ME"
 
 # The server config contract (shared with server/src/config.rs): section -> key -> type.
 CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -265,8 +285,10 @@ def all_renders(scratch: Path) -> dict[str, list[dict]]:
     renders = {"base": render(K8S / "base")}
     for overlay in OVERLAYS:
         renders[overlay] = render(K8S / "overlays" / overlay)
-        # "<overlay>+components": the overlay with every component in COMPONENTS.
-        renders[f"{overlay}+components"] = render_with_components(overlay, COMPONENTS, scratch)
+        # "<overlay>+components": the overlay with every component in COMPONENTS[overlay].
+        renders[f"{overlay}+components"] = render_with_components(overlay, COMPONENTS[overlay], scratch)
+    for name, (overlay, components) in EXTRA_RENDERS.items():
+        renders[name] = render_with_components(overlay, components, scratch)
     return renders
 
 
@@ -316,6 +338,90 @@ def selector_matches(selector: dict, labels: dict) -> bool:
     return bool(selector) and all(labels.get(k) == v for k, v in selector.items())
 
 
+def check_pod_security(r: Render, pod: dict, container: dict, c: str, owner: str, uid_note: str) -> None:
+    """The restricted Pod Security Standard and resources, for one container of a pod template."""
+    # Security context (pod or container level, container wins).
+    psc, csc = pod.get("securityContext", {}), container.get("securityContext", {})
+    def sc(key: str):
+        return csc.get(key, psc.get(key))
+    if sc("runAsNonRoot") is not True:
+        r.fail(f"{c}.securityContext.runAsNonRoot must be true")
+    if (sc("runAsUser") or 0) == 0:
+        r.fail(f"{c}.securityContext.runAsUser must be a non-zero UID ({uid_note})")
+    if csc.get("readOnlyRootFilesystem") is not True:
+        r.fail(f"{c}.securityContext.readOnlyRootFilesystem must be true")
+    if csc.get("allowPrivilegeEscalation") is not False:
+        r.fail(f"{c}.securityContext.allowPrivilegeEscalation must be false")
+    if csc.get("privileged"):
+        r.fail(f"{c}.securityContext.privileged must not be true")
+    if csc.get("capabilities", {}).get("drop") != ["ALL"] or csc.get("capabilities", {}).get("add"):
+        r.fail(f"{c}.securityContext.capabilities must drop ALL and add none")
+    if (sc("seccompProfile") or {}).get("type") != "RuntimeDefault":
+        r.fail(f"{c}.securityContext.seccompProfile.type must be RuntimeDefault")
+    if pod.get("automountServiceAccountToken") is not False:
+        r.fail(f"{owner}: automountServiceAccountToken must be false (no API access needed)")
+    res = container.get("resources", {})
+    for kind in ("requests", "limits"):
+        for what in ("cpu", "memory"):
+            if what not in res.get(kind, {}):
+                r.fail(f"{c}.resources.{kind}.{what} is missing")
+
+
+def secret_env(container: dict) -> dict[str, dict]:
+    """The container's environment variables set from a Secret: name -> secretKeyRef."""
+    return {e["name"]: e["valueFrom"]["secretKeyRef"] for e in container.get("env", [])
+            if "secretKeyRef" in e.get("valueFrom", {})}
+
+
+def plaintext_passwords(obj: dict, where: str) -> list[str]:
+    """A password written into a manifest that is not a Secret: a scheme://user:password@ URL in any
+    string (a ConfigMap's server.toml, an env value, an annotation), or an env variable whose name
+    says password, token or catalog URL set with a literal `value`."""
+    if obj.get("kind") == "Secret":
+        return []
+    name = f"{obj.get('kind')}/{obj.get('metadata', {}).get('name')}"
+    problems: list[str] = []
+    def walk(node: object, path: str) -> None:
+        if isinstance(node, dict):
+            if "name" in node and "value" in node and isinstance(node.get("name"), str) \
+                    and SECRET_ENV_NAME.search(node["name"]) and node["value"]:
+                problems.append(f"{where}: {name}: plaintext password: env {node['name']} at {path} has a literal "
+                                "value; set it with valueFrom.secretKeyRef")
+            for k, v in node.items():
+                walk(v, f"{path}.{k}")
+        elif isinstance(node, list):
+            for i, v in enumerate(node):
+                walk(v, f"{path}[{i}]")
+        elif isinstance(node, str) and CREDENTIAL_URL.search(node):
+            problems.append(f"{where}: {name}: plaintext password in a URL at {path}; put the URL in a Secret")
+    walk(obj, "")
+    return problems
+
+
+def check_postgis(r: Render, sts: dict, services: list[dict]) -> None:
+    """The test database's StatefulSet (components/postgis): restricted security context, resources,
+    a pg_isready readiness probe, its data on a volumeClaimTemplate, a Service selecting it."""
+    sname = f"StatefulSet/{sts['metadata']['name']}"
+    pod = sts["spec"]["template"]["spec"]
+    labels = sts["spec"]["template"]["metadata"].get("labels", {})
+    for container in pod.get("containers", []):
+        c = f"{sname}.containers[{container['name']}]"
+        check_pod_security(r, pod, container, c, sname, "postgres is 999")
+        command = " ".join(container.get("readinessProbe", {}).get("exec", {}).get("command", []))
+        if "pg_isready" not in command:
+            r.fail(f"{c}.readinessProbe must run pg_isready (ready only when PostgreSQL accepts connections)")
+        templates = {t["metadata"]["name"] for t in sts["spec"].get("volumeClaimTemplates", [])}
+        data = [m for m in container.get("volumeMounts", []) if m["mountPath"].startswith("/var/lib/postgresql")]
+        if not data or data[0]["name"] not in templates:
+            r.fail(f"{c}: the data directory /var/lib/postgresql/data must be on a volumeClaimTemplate")
+        for e in container.get("env", []):
+            if e["name"] == "POSTGRES_PASSWORD" and "secretKeyRef" not in e.get("valueFrom", {}):
+                r.fail(f"{c}: POSTGRES_PASSWORD must come from a Secret (valueFrom.secretKeyRef)")
+    if not any(s["metadata"]["name"] == sts["spec"].get("serviceName") and selector_matches(s["spec"].get("selector", {}), labels)
+               for s in services):
+        r.fail(f"{sname}: no Service {sts['spec'].get('serviceName')!r} selects its pods")
+
+
 def check_render(r: Render, out_dir: Path | None) -> None:
     deployment = r.one("Deployment")
     if deployment is None:
@@ -337,33 +443,8 @@ def check_render(r: Render, out_dir: Path | None) -> None:
     if "replicas" in spec and r.of_kind("HorizontalPodAutoscaler"):
         r.fail(f"Deployment/{dname}: spec.replicas is set while an HPA owns the replica count")
 
-    # Security context (pod or container level, container wins).
-    psc, csc = pod.get("securityContext", {}), server.get("securityContext", {})
-    def sc(key: str):
-        return csc.get(key, psc.get(key))
-    if sc("runAsNonRoot") is not True:
-        r.fail(f"{c}.securityContext.runAsNonRoot must be true")
-    if (sc("runAsUser") or 0) == 0:
-        r.fail(f"{c}.securityContext.runAsUser must be a non-zero UID (the image uses {IMAGE_UID})")
-    if csc.get("readOnlyRootFilesystem") is not True:
-        r.fail(f"{c}.securityContext.readOnlyRootFilesystem must be true")
-    if csc.get("allowPrivilegeEscalation") is not False:
-        r.fail(f"{c}.securityContext.allowPrivilegeEscalation must be false")
-    if csc.get("privileged"):
-        r.fail(f"{c}.securityContext.privileged must not be true")
-    if csc.get("capabilities", {}).get("drop") != ["ALL"] or csc.get("capabilities", {}).get("add"):
-        r.fail(f"{c}.securityContext.capabilities must drop ALL and add none")
-    if (sc("seccompProfile") or {}).get("type") != "RuntimeDefault":
-        r.fail(f"{c}.securityContext.seccompProfile.type must be RuntimeDefault")
-    if pod.get("automountServiceAccountToken") is not False:
-        r.fail(f"Deployment/{dname}: automountServiceAccountToken must be false (no API access needed)")
-
-    # Resources.
+    check_pod_security(r, pod, server, c, f"Deployment/{dname}", f"the image uses {IMAGE_UID}")
     res = server.get("resources", {})
-    for kind in ("requests", "limits"):
-        for what in ("cpu", "memory"):
-            if what not in res.get(kind, {}):
-                r.fail(f"{c}.resources.{kind}.{what} is missing")
 
     # Config: the ConfigMap mounted at /etc/landing, with the container's env applied.
     env = {e["name"]: e.get("value", "") for e in server.get("env", []) if "value" in e}
@@ -469,7 +550,10 @@ def check_render(r: Render, out_dir: Path | None) -> None:
             target = out_dir / r.name
             target.mkdir(parents=True, exist_ok=True)
             (target / "server.toml").write_text(toml_text)
-            (target / "env").write_text("".join(f"{k}={v}\n" for k, v in sorted(env.items()) if k.startswith(ENV_PREFIX)))
+            # Variables from Secrets as secret:NAME/KEY; check.sh puts local stand-ins in their place.
+            from_secret = {k: f"secret:{ref.get('name')}/{ref.get('key')}" for k, ref in secret_env(server).items()}
+            (target / "env").write_text("".join(f"{k}={v}\n" for k, v in sorted({**env, **from_secret}.items())
+                                                if k.startswith(ENV_PREFIX)))
 
     # Secrets referenced must be documented in the examples.
     example_secrets = {
@@ -477,13 +561,76 @@ def check_render(r: Render, out_dir: Path | None) -> None:
         for f in sorted((K8S / "examples").glob("*.yaml"))
         for o in yaml.safe_load_all(f.read_text()) if o and o.get("kind") == "Secret"
     }
-    for v in pod.get("volumes", []):
-        name = v.get("secret", {}).get("secretName")
+    from_secrets = secret_env(server)
+    referenced = [v.get("secret", {}).get("secretName") for v in pod.get("volumes", [])]
+    referenced += [ref.get("name") for ref in from_secrets.values()]
+    for sts in r.of_kind("StatefulSet"):
+        for container in sts["spec"]["template"]["spec"].get("containers", []):
+            referenced += [ref.get("name") for ref in secret_env(container).values()]
+    for name in referenced:
         if name and name not in example_secrets:
             r.fail(f"Deployment/{dname}: Secret {name} has no example in deploy/k8s/examples/")
 
+    # No password in a manifest: it belongs in a Secret.
+    for obj in r.objects:
+        for problem in plaintext_passwords(obj, r.name):
+            r.problems.append(problem)
+
+    # The catalog's storage (issue 41). SQLite: a PersistentVolumeClaim (single-writer access) at
+    # the file's directory, exactly one replica, no HPA, Recreate rollouts, so that two pods never
+    # open the file. PostgreSQL + PostGIS (the fleet): the URL, password included, from a Secret,
+    # and no SQLite volume.
+    catalog = (config or {}).get("catalog", {})
+    if config is not None and catalog.get("enabled", True):
+        mounts = {m["mountPath"]: m["name"] for m in server.get("volumeMounts", [])}
+        volumes = {v["name"]: v for v in pod.get("volumes", [])}
+        parent = os.path.dirname(catalog.get("path", ""))
+        claim_volume = volumes.get(mounts.get(parent, ""), {}).get("persistentVolumeClaim")
+        url_from_secret = CATALOG_URL_ENV in from_secrets
+        replicas = spec.get("replicas")
+        hpas = r.of_kind("HorizontalPodAutoscaler")
+        if catalog.get("url"):
+            r.fail(f"catalog.url is set in the ConfigMap or an env value: the URL carries the database password; "
+                   f"set {CATALOG_URL_ENV} with valueFrom.secretKeyRef")
+        if (hpas or (replicas or 1) > 1) and not url_from_secret:
+            r.fail(f"Deployment/{dname}: several replicas (HPA or spec.replicas) with the catalog on need one "
+                   f"shared PostgreSQL: set {CATALOG_URL_ENV} from a Secret (valueFrom.secretKeyRef), as the fleet overlay does")
+        if url_from_secret:
+            if claim_volume is not None:
+                r.fail(f"Deployment/{dname}: the catalog URL comes from a Secret, yet a PersistentVolumeClaim is "
+                       f"mounted at {parent}: a fleet shares PostgreSQL, not a volume")
+            for np in r.of_kind("NetworkPolicy"):
+                spec_np = np["spec"]
+                if "Egress" in spec_np.get("policyTypes", []) and not spec_np.get("egress") \
+                        and selector_matches(spec_np.get("podSelector", {}).get("matchLabels", {}), pod_labels):
+                    r.fail(f"NetworkPolicy/{np['metadata']['name']} denies all egress: the catalog's PostgreSQL is "
+                           "unreachable (allow DNS and the database's port)")
+        elif claim_volume is None:
+            r.fail(f"catalog.path = {catalog.get('path')!r}: no PersistentVolumeClaim is mounted at {parent} "
+                   f"(the SQLite file would be unwritable or lost with the pod); or set {CATALOG_URL_ENV} from a Secret")
+        else:
+            claim_name = claim_volume.get("claimName")
+            pvc = next((o for o in r.of_kind("PersistentVolumeClaim") if o["metadata"]["name"] == claim_name), None)
+            if pvc is None:
+                r.fail(f"Deployment/{dname}: PersistentVolumeClaim {claim_name} is not part of the render")
+            elif not set(pvc["spec"].get("accessModes", [])) <= SINGLE_WRITER_ACCESS_MODES:
+                r.fail(f"PersistentVolumeClaim/{claim_name}: accessModes {pvc['spec'].get('accessModes')} must be "
+                       "ReadWriteOnce (or ReadWriteOncePod): one SQLite writer, never a shared file")
+            if replicas != 1:
+                r.fail(f"Deployment/{dname}: spec.replicas = {replicas}: a PVC-backed SQLite catalog runs exactly 1 "
+                       "replica (one writer; two pods must never share the file)")
+            if hpas:
+                r.fail(f"HorizontalPodAutoscaler/{hpas[0]['metadata']['name']} scales a PVC-backed SQLite catalog: "
+                       "several replicas need the fleet overlay (PostgreSQL)")
+            if spec.get("strategy", {}).get("type") != "Recreate":
+                r.fail(f"Deployment/{dname}: spec.strategy.type must be Recreate with a PVC-backed catalog "
+                       "(a rolling update runs two pods on one ReadWriteOnce volume)")
+
     # Services select the pods; the main one exposes grpc (and metrics), the headless one is headless.
-    services = r.of_kind("Service")
+    all_services = r.of_kind("Service")
+    services = [s for s in all_services if not s["metadata"]["name"].startswith("landing-postgis")]
+    for sts in r.of_kind("StatefulSet"):
+        check_postgis(r, sts, all_services)
     if not services:
         r.fail("no Service")
     for s in services:
@@ -499,8 +646,10 @@ def check_render(r: Render, out_dir: Path | None) -> None:
         r.fail("no headless Service (clusterIP: None) for client-side balancing")
 
     # HPA and PDB point at the Deployment.
-    hpa = r.one("HorizontalPodAutoscaler")
-    if hpa is not None:
+    hpas = r.of_kind("HorizontalPodAutoscaler")
+    if len(hpas) > 1:
+        r.fail(f"expected at most one HorizontalPodAutoscaler, found {len(hpas)}")
+    for hpa in hpas:
         ref = hpa["spec"]["scaleTargetRef"]
         if (ref.get("kind"), ref.get("name")) != ("Deployment", dname):
             r.fail(f"HorizontalPodAutoscaler/{hpa['metadata']['name']}: scaleTargetRef is {ref}, not Deployment/{dname}")
@@ -568,13 +717,33 @@ def check_all(renders: dict[str, list[dict]], out_dir: Path | None) -> tuple[lis
     return problems, count
 
 
+def example_placeholders(obj: dict, where: str) -> list[str]:
+    """An example Secret holds placeholders only: every password, URL password or token value says
+    REPLACE-ME."""
+    if obj.get("kind") != "Secret":
+        return []
+    problems = []
+    for key, value in obj.get("stringData", {}).items():
+        match = CREDENTIAL_URL.search(value)
+        if match and PLACEHOLDER not in match.group(1):
+            problems.append(f"{where}: Secret/{obj['metadata']['name']}: stringData.{key} has a real-looking password "
+                            f"in its URL; write {PLACEHOLDER}")
+        elif not match and PLACEHOLDER not in value:
+            problems.append(f"{where}: Secret/{obj['metadata']['name']}: stringData.{key} is not a {PLACEHOLDER} placeholder")
+    if obj.get("data"):
+        problems.append(f"{where}: Secret/{obj['metadata']['name']}: use stringData placeholders, not base64 data")
+    return problems
+
+
 def examples() -> tuple[list[str], int]:
     problems: list[str] = []
     count = 0
     for path in sorted((K8S / "examples").glob("*.yaml")):
         for obj in yaml.safe_load_all(path.read_text()):
             if obj:
-                problems += schema_validate(obj, str(path.relative_to(DEPLOY.parent)))
+                where = str(path.relative_to(DEPLOY.parent))
+                problems += schema_validate(obj, where)
+                problems += plaintext_passwords(obj, where) + example_placeholders(obj, where)
                 count += 1
     return problems, count
 
@@ -583,9 +752,9 @@ def examples() -> tuple[list[str], int]:
 # Container recipes: what hadolint cannot know (agreement with the config and the manifests).
 
 ORT_VERSION = "1.31.1"
-# Kubernetes adds the auth Secret; and its base runs several replicas (the HPA) with no storage
-# for a catalog yet, so the catalog is off there until a volume or PostGIS is given (issue 41).
-ALLOWED_CONFIG_DIFFERENCES = {("auth", "tokens_file"), ("catalog", "enabled")}
+# Kubernetes adds the auth Secret. The catalog is the same: SQLite at the same path, on the base's
+# volume; the fleet sets its URL through the environment, not the file.
+ALLOWED_CONFIG_DIFFERENCES = {("auth", "tokens_file")}
 DOCKERFILES = {"Dockerfile": "onnxruntime", "Dockerfile.gpu": "onnxruntime-gpu"}
 
 
@@ -650,7 +819,7 @@ def check_images() -> list[str]:
             a, b = baked.get(section, {}).get(key), cluster.get(section, {}).get(key)
             if a != b and (section, key) not in ALLOWED_CONFIG_DIFFERENCES:
                 problems.append(f"{section}.{key} is {a!r} in deploy/config/server.toml but {b!r} in "
-                                "deploy/k8s/base/server.toml; only auth.tokens_file and catalog.enabled may differ")
+                                "deploy/k8s/base/server.toml; only auth.tokens_file may differ")
 
     ignore_text = (DEPLOY / "dockerignore").read_text()
     for copy_name in ("Dockerfile.dockerignore", "Dockerfile.gpu.dockerignore"):
@@ -735,7 +904,49 @@ def mutations() -> list[tuple[str, str, object]]:
         assert old in c["data"]["server.toml"], old
         c["data"]["server.toml"] = c["data"]["server.toml"].replace(old, new)
 
+    def sts(objs):
+        return next(o for o in objs if o["kind"] == "StatefulSet")
+    def sts_ctr(objs):
+        return sts(objs)["spec"]["template"]["spec"]["containers"][0]
+    def set_env(container, name, **entry):
+        container["env"] = [e for e in container.get("env", []) if e["name"] != name] + ([{"name": name, **entry}] if entry else [])
+    hpa = {"apiVersion": "autoscaling/v2", "kind": "HorizontalPodAutoscaler", "metadata": {"name": "landing-server"},
+           "spec": {"scaleTargetRef": {"apiVersion": "apps/v1", "kind": "Deployment", "name": "landing-server"},
+                    "minReplicas": 2, "maxReplicas": 4}}
+    deny_egress = {"apiVersion": "networking.k8s.io/v1", "kind": "NetworkPolicy", "metadata": {"name": "landing-server"},
+                   "spec": {"podSelector": {"matchLabels": {"app.kubernetes.io/name": "landing-server",
+                                                            "app.kubernetes.io/component": "server"}},
+                            "policyTypes": ["Ingress", "Egress"], "ingress": [{"ports": [{"port": "grpc"}, {"port": "metrics"}]}],
+                            "egress": []}}
+    leaked = "postgres://landing:hunter2@landing-postgis:5432/landing"
+
     return [
+        # The catalog's storage: SQLite on a single-writer volume, one replica, Recreate ...
+        ("cpu", "exactly 1 replica", lambda o: dep(o)["spec"].update(replicas=2)),
+        ("base", "Recreate", lambda o: dep(o)["spec"].update(strategy={"type": "RollingUpdate"})),
+        ("cpu", "ReadWriteOnce", lambda o: next(c for c in o if c["kind"] == "PersistentVolumeClaim")["spec"].update(accessModes=["ReadWriteMany"])),
+        ("cpu", "scales a PVC-backed SQLite catalog", lambda o: o.append(copy.deepcopy(hpa))),
+        ("cpu", "no PersistentVolumeClaim is mounted at /var/lib/landing",
+         lambda o: ctr(o).update(volumeMounts=[m for m in ctr(o)["volumeMounts"] if m["mountPath"] != "/var/lib/landing"])),
+        ("gpu", "PersistentVolumeClaim landing-server-catalog is not part of the render",
+         lambda o: o.remove(next(c for c in o if c["kind"] == "PersistentVolumeClaim"))),
+        # ... or, for several replicas, one PostgreSQL with the URL from a Secret.
+        ("fleet", "need one shared PostgreSQL", lambda o: set_env(ctr(o), CATALOG_URL_ENV)),
+        ("gpu+fleet", "catalog.url is set", lambda o: set_env(ctr(o), CATALOG_URL_ENV, value=leaked)),
+        ("fleet", "plaintext password in a URL", lambda o: edit_toml(o, 'url = ""', f'url = "{leaked}"')),
+        ("fleet", "has no example", lambda o: ctr(o)["env"][0]["valueFrom"]["secretKeyRef"].update(name="catalog-db")),
+        ("fleet", "a fleet shares PostgreSQL, not a volume",
+         lambda o: (dep(o)["spec"]["template"]["spec"]["volumes"].append({"name": "catalog", "persistentVolumeClaim": {"claimName": "x"}}),
+                    ctr(o)["volumeMounts"].append({"name": "catalog", "mountPath": "/var/lib/landing"}))),
+        ("fleet", "denies all egress", lambda o: o.append(copy.deepcopy(deny_egress))),
+        ("fleet+components", "plaintext password: env POSTGRES_PASSWORD", lambda o: set_env(sts_ctr(o), "POSTGRES_PASSWORD", value="hunter2")),
+        ("fleet+components", "pg_isready", lambda o: sts_ctr(o).pop("readinessProbe")),
+        ("fleet+components", "postgis].securityContext.runAsNonRoot",
+         lambda o: (sts(o)["spec"]["template"]["spec"]["securityContext"].pop("runAsNonRoot"), sts_ctr(o)["securityContext"].pop("runAsNonRoot"))),
+        ("fleet+components", "postgis].resources.limits.memory", lambda o: sts_ctr(o)["resources"]["limits"].pop("memory")),
+        ("fleet+components", "volumeClaimTemplate", lambda o: sts(o)["spec"].pop("volumeClaimTemplates")),
+        ("fleet+components", "no Service 'landing-postgis'",
+         lambda o: o.remove(next(s for s in o if s["kind"] == "Service" and s["metadata"]["name"] == "landing-postgis"))),
         ("cpu", "runAsNonRoot", lambda o: ctr(o)["securityContext"].update(runAsNonRoot=False)),
         ("cpu", "readOnlyRootFilesystem", lambda o: ctr(o)["securityContext"].pop("readOnlyRootFilesystem")),
         ("cpu", "allowPrivilegeEscalation", lambda o: ctr(o)["securityContext"].update(allowPrivilegeEscalation=True)),
@@ -759,7 +970,7 @@ def mutations() -> list[tuple[str, str, object]]:
         ("cpu", "livenessProbe is missing", lambda o: ctr(o).pop("livenessProbe")),
         ("cpu", "selector does not match", lambda o: next(s for s in o if s["kind"] == "Service")["spec"]["selector"].update(app="x")),
         ("cpu", "headless", lambda o: [s["spec"].pop("clusterIP", None) for s in o if s["kind"] == "Service"]),
-        ("cpu", "scaleTargetRef", lambda o: next(h for h in o if h["kind"] == "HorizontalPodAutoscaler")["spec"]["scaleTargetRef"].update(name="other")),
+        ("fleet", "scaleTargetRef", lambda o: next(h for h in o if h["kind"] == "HorizontalPodAutoscaler")["spec"]["scaleTargetRef"].update(name="other")),
         ("cpu", "spec.replicas", lambda o: dep(o)["spec"].update(replicas=3)),
         ("cpu", "schema", lambda o: ctr(o).update(livenessProbes={})),
         ("cpu", "schema", lambda o: dep(o)["spec"]["template"]["spec"].update(terminationGracePeriodSeconds="40")),
@@ -794,7 +1005,8 @@ def selftest(scratch: Path) -> int:
             print(f"selftest {status}: {name}: breaking '{fragment}' -> {hit[0] if hit else problems or 'no problem reported'}")
     failed += selftest_images(scratch)
     failed += selftest_extract_ort(scratch)
-    total = len(mutations()) + len(IMAGE_MUTATIONS) + 1
+    failed += selftest_example_secrets()
+    total = len(mutations()) + len(IMAGE_MUTATIONS) + 2
     print(f"selftest: {total - failed} passed, {failed} failed")
     return 1 if failed else 0
 
@@ -815,6 +1027,17 @@ IMAGE_MUTATIONS = [
     ("config/server.toml", 'ort_library = ""', 'ort_library = ".ort/libonnxruntime.so"', "ort_library"),
     ("config/server.toml", "queue_capacity = 64", "queue_capacity = 32", "pipeline.queue_capacity is 32"),
 ]
+
+
+def selftest_example_secrets() -> int:
+    """An example Secret with a real-looking password in place of REPLACE-ME is refused."""
+    path = K8S / "examples" / "catalog-secret.example.yaml"
+    secret = next(o for o in yaml.safe_load_all(path.read_text()) if o and o["metadata"]["name"] == "landing-server-catalog-db")
+    secret["stringData"]["url"] = secret["stringData"]["url"].replace(PLACEHOLDER, "hunter2")
+    hit = [p for p in example_placeholders(secret, str(path)) if "real-looking password" in p]
+    if VERBOSE or not hit:
+        print(f"selftest {'ok' if hit else 'MISSED'}: {path.name}: breaking 'REPLACE-ME' -> {hit[0] if hit else 'no problem reported'}")
+    return 0 if hit else 1
 
 
 def selftest_extract_ort(scratch: Path) -> int:
