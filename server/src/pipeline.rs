@@ -128,6 +128,9 @@ pub struct Pipeline {
     pub defaults: Params,
     /// The segmentation model, when one is loaded.
     pub segmenter: Option<Arc<Segmenter>>,
+    /// Whether fused answers carry the evidence the landing-site catalog takes (the server has a
+    /// catalog: `catalog.enabled`); without one the work is skipped.
+    pub catalogue: bool,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -145,6 +148,7 @@ impl Pipeline {
         Self {
             defaults,
             segmenter: None,
+            catalogue: false,
         }
     }
 

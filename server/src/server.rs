@@ -369,6 +369,7 @@ fn reflection() -> tonic_reflection::server::Builder<'static> {
 /// The pipeline the config asks for: default parameters and, when enabled, the model.
 fn load_pipeline(config: &Config) -> anyhow::Result<Pipeline> {
     let mut pipeline = Pipeline::geometry_only(Params::default());
+    pipeline.catalogue = config.catalog.enabled;
     if config.segmentation.enabled {
         let segmenter = segmentation::Segmenter::load(&config.segmentation).with_context(|| {
             format!(

@@ -447,10 +447,7 @@ mod tests {
     }
 
     fn dispatcher(capacity: usize, max_queued_bytes: u64) -> Arc<Dispatcher> {
-        let pipeline = Pipeline {
-            defaults: Default::default(),
-            segmenter: None,
-        };
+        let pipeline = Pipeline::geometry_only(Default::default());
         Arc::new(Dispatcher::new(
             pipeline,
             capacity,

@@ -290,15 +290,17 @@ impl FusedFrame<'_> {
         let mode = classified.mode;
         let mut out = locate(self.frame, located, mode, classified.timings, self.start)?;
         out.fusion = Some(summary);
-        let surface = MapSurface {
-            points: &local,
-            origin: registered.origin,
-            classes: classes.as_deref(),
-            unresolved: &unresolved,
-            landable: &self.options.params.landable_classes,
-            resolving: map.params().max_pixel_footprint_m > 0.0,
-        };
-        out.catalog = Some(evidence(self.frame.geodetic_origin, &surface, &out.sites));
+        if self.pipeline.catalogue {
+            let surface = MapSurface {
+                points: &local,
+                origin: registered.origin,
+                classes: classes.as_deref(),
+                unresolved: &unresolved,
+                landable: &self.options.params.landable_classes,
+                resolving: map.params().max_pixel_footprint_m > 0.0,
+            };
+            out.catalog = Some(evidence(self.frame.geodetic_origin, &surface, &out.sites));
+        }
         Ok(out)
     }
 }
