@@ -28,7 +28,13 @@ for _ in $(seq 1 150); do "$bin/landing" info --server "http://$addr" >/dev/null
 # fused and placed in midtown Manhattan, feeds it; then ask what it knows near the sample's roofs.
 origin=40.7536,-73.9832
 "$bin/landing" replay samples/rooftops.mcap --fuse --origin "$origin" --server "http://$addr" >/dev/null
-sleep 2  # the catalog's writer gathers a batch for up to catalog.flush_interval_s (1 s)
+# The catalog's writer gathers a batch for up to catalog.flush_interval_s (1 s): ask until it
+# answers with a site, for at most 10 s, then show what it knows.
+for _ in $(seq 1 50); do
+  "$bin/landing" sites --near "$origin" --radius 1000 --json --server "http://$addr" 2>/dev/null |
+    grep -q '"distance_m"' && break
+  sleep 0.2
+done
 "$bin/landing" sites --near "$origin" --radius 1000 --server "http://$addr"
 mkdir -p out
 for frame in 0 7 14; do
