@@ -153,7 +153,7 @@ impl CatalogReport {
         let mut s = String::new();
         let _ = writeln!(
             s,
-            "{:<6} {:>10} {:>6} {:>6} {:>6} {:>16} {:>13}",
+            "{:<6} {:>10} {:>6} {:>6} {:>6} {:>19} {:>13}",
             "visit", "approaches", "sites", "unsafe", "stale", "stale age s p50/max", "recall"
         );
         for r in self.per_visit.iter().chain([&self.overall]) {
@@ -195,7 +195,7 @@ fn row_text(r: &CatalogRow) -> String {
         format!("{}/{} {v:.2}", r.found_roofs, r.landable_roofs)
     });
     format!(
-        "{visit:<6} {:>10} {:>6} {:>6} {:>6} {ages:>16} {recall:>13}",
+        "{visit:<6} {:>10} {:>6} {:>6} {:>6} {ages:>19} {recall:>13}",
         r.approaches, r.sites, r.unsafe_sites, r.stale
     )
 }
