@@ -528,9 +528,89 @@ mod tests {
         assert!(r.to_text().contains("all"), "{}", r.to_text());
     }
 
+    /// A 20 m square roof at 20 m with a 4 m obstacle in its north-east corner.
+    fn roof_with_obstacle() -> RoofTruth {
+        RoofTruth {
+            obstacles: vec![crate::metrics::Obstacle {
+                class: 1,
+                footprint: Polygon2::rect([14.0, 14.0], [18.0, 18.0]),
+                seen: true,
+            }],
+            outline: Polygon2::rect([0.0, 0.0], [20.0, 20.0]),
+            interior: Polygon2::rect([0.0, 0.0], [20.0, 20.0]),
+            ..square_roof()
+        }
+    }
+
+    const ORIGIN: Geodetic = Geodetic {
+        latitude_deg: 40.75,
+        longitude_deg: -73.98,
+        altitude_m: 10.0,
+    };
+
+    fn catalog_site(id: &str, enu: [f64; 3], radius_m: f64, at: SystemTime) -> CatalogSite {
+        let g = enu_to_geodetic(ORIGIN, enu);
+        CatalogSite {
+            id: id.into(),
+            center: Some(GeodeticPoint {
+                latitude_deg: g.latitude_deg,
+                longitude_deg: g.longitude_deg,
+                altitude_m: g.altitude_m,
+            }),
+            safe_radius_m: radius_m,
+            last_confirmed: Some(at.into()),
+            ..Default::default()
+        }
+    }
+
     #[test]
-    fn true_radius_of_a_clear_square_roof() {
-        let roof = RoofTruth {
+    fn unsafe_when_confirmed_by_the_visit_stale_when_older() {
+        let visit = Visit {
+            name: "v01-w1-b000.mcap".into(),
+            index: Some(1),
+            frames: vec![],
+            origin: ORIGIN,
+            roofs: vec![roof_with_obstacle()],
+        };
+        let started = SystemTime::now() - Duration::from_secs(10);
+        let before = started - Duration::from_secs(3600);
+        let found = [
+            // Safe, in the clear south-west: counts for recall.
+            catalog_site(
+                "safe",
+                [5.0, 5.0, 20.0],
+                3.0,
+                started + Duration::from_secs(1),
+            ),
+            // On the obstacle, confirmed by this visit: unsafe.
+            catalog_site(
+                "bad",
+                [15.0, 15.0, 20.0],
+                2.0,
+                started + Duration::from_secs(2),
+            ),
+            // On the obstacle, confirmed an hour before the visit: stale.
+            catalog_site("old", [16.0, 16.0, 20.0], 1.5, before),
+        ];
+        let params = MetricsParams::default();
+        let (row, scores) =
+            score_visit(&visit, &found, started, &params, &CatalogConfig::default());
+        assert_eq!(
+            (row.sites, row.unsafe_sites, row.stale),
+            (3, 1, 1),
+            "{scores:#?}"
+        );
+        assert_eq!((row.found_roofs, row.landable_roofs), (1, 1));
+        assert!((row.stale_ages_s[0] - 3610.0).abs() < 5.0, "{row:?}");
+        // The centres come back into the local frame.
+        assert!(
+            (scores[0].center[0] - 5.0).abs() < 1e-6 && (scores[0].center[2] - 20.0).abs() < 1e-6
+        );
+        assert_eq!(scores[0].roof, Some(0));
+    }
+
+    fn square_roof() -> RoofTruth {
+        RoofTruth {
             id: 0,
             outline: Polygon2::rect([0.0, 0.0], [10.0, 10.0]),
             interior: Polygon2::rect([0.0, 0.0], [10.0, 10.0]),
@@ -542,7 +622,12 @@ mod tests {
             stated_best_radius_m: None,
             scored: true,
             target: true,
-        };
+        }
+    }
+
+    #[test]
+    fn true_radius_of_a_clear_square_roof() {
+        let roof = square_roof();
         let r = true_radius(&roof, 0.05);
         assert!((r - 5.0).abs() < 0.1, "{r}");
     }
