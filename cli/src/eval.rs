@@ -90,8 +90,9 @@ pub struct EvalArgs {
     #[arg(long)]
     pub catalog: bool,
     /// With `--catalog`: how long to wait after each visit for the catalog to show its
-    /// confirmations (the server writes every `catalog.flush_interval_s`), seconds.
-    #[arg(long, default_value_t = 3.0, value_parser = parse_tolerance)]
+    /// confirmations, seconds: at most this, and a third of it without change once one shows
+    /// (keep it at least 3 × the server's `catalog.flush_interval_s`, 1 s by default).
+    #[arg(long, default_value_t = 4.0, value_parser = parse_tolerance)]
     pub catalog_wait: f64,
 }
 
@@ -246,6 +247,12 @@ async fn catalog_cmd(
         wait: std::time::Duration::from_secs_f64(args.catalog_wait),
         min_truth_radius_m: args.min_truth_radius,
     };
+    if args.limit != 0 || args.scenarios.is_some() {
+        return Err(CliError {
+            code: exit::USAGE,
+            message: "--catalog takes a whole revisit set (`landing-sim scenarios --revisits N`): no --limit, no --scenarios".into(),
+        });
+    }
     let scenarios = scenarios(args)?;
     let client = LandingClient::connect(client_config(connection)?).await?;
     let report = run_catalog(&client, &scenarios, &config, |done, total| {

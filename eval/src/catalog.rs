@@ -37,7 +37,8 @@ pub struct CatalogConfig {
     /// Options, metrics and window of the fused streams (its `modes` are replaced by `mode`).
     pub eval: EvalConfig,
     /// How long to wait after a stream for the catalog to show this visit's confirmations (the
-    /// server writes them in batches, every `catalog.flush_interval_s`).
+    /// server writes them in batches, every `catalog.flush_interval_s`): at most this, and a
+    /// third of it without change once a confirmation of this visit shows.
     pub wait: Duration,
     /// A target roof counts for recall when its true landable circle is at least this, metres.
     pub min_truth_radius_m: f64,
@@ -48,7 +49,7 @@ impl Default for CatalogConfig {
         Self {
             mode: Mode::Model,
             eval: EvalConfig::default(),
-            wait: Duration::from_secs(3),
+            wait: Duration::from_secs(4),
             min_truth_radius_m: 1.0,
         }
     }
@@ -374,8 +375,9 @@ pub async fn run_catalog(
     Ok(CatalogReport::from_rows(config.mode, rows, sites))
 }
 
-/// The sites around the visit's targets once the catalog shows a confirmation from this visit,
-/// or after `wait` (a visit may confirm nothing).
+/// The sites around the visit's targets once the catalog shows a confirmation from this visit
+/// and has then stayed the same for a third of `wait` (the stream's last observation may land
+/// in a later batch than its first), or after `wait` (a visit may confirm nothing).
 async fn settle(
     client: &LandingClient,
     visit: &Visit,
@@ -383,14 +385,21 @@ async fn settle(
     wait: Duration,
 ) -> Result<Vec<CatalogSite>, EvalError> {
     let deadline = Instant::now() + wait;
+    let quiet = wait / 3;
+    let mut last: Option<(Vec<CatalogSite>, Instant)> = None;
     loop {
         let found = sites_near_targets(client, visit).await?;
         let fresh = found
             .iter()
             .any(|s| confirmed_at(s).is_some_and(|t| t >= started));
-        if fresh || Instant::now() >= deadline {
+        let since = match last {
+            Some((prev, since)) if prev == found => since,
+            _ => Instant::now(),
+        };
+        if (fresh && since.elapsed() >= quiet) || Instant::now() >= deadline {
             return Ok(found);
         }
+        last = Some((found, since));
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
 }
