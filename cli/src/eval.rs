@@ -7,6 +7,7 @@ use clap::Args;
 use landing_proto::v1::{FusionOptions, PipelineOptions};
 
 use landing_client::LandingClient;
+use landing_eval::catalog::{CatalogConfig, run_catalog, write_catalog_report};
 use landing_eval::report::{Mode, Summary, Targets, summarize, write_report};
 use landing_eval::run::{EvalConfig, Scenario, fill_scanned_regions, run};
 use landing_eval::truth::{load_scenarios, recording_files};
@@ -78,6 +79,21 @@ pub struct EvalArgs {
     /// with the server's work (paired timing runs on one box).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub window: u32,
+    /// Score the fleet's catalog over a revisit set (`landing-sim scenarios --revisits N`):
+    /// stream every visit's approach fused, in time order, and after each search the catalog
+    /// around the visit's target roofs; judge each site against the world at that visit
+    /// (unsafe though confirmed by this visit: must be 0; stale: unsafe, confirmed before; recall
+    /// of landable target roofs). The server's catalog must be FRESH (a new
+    /// LANDING__CATALOG__PATH): the run refuses one that already holds sites around the set's
+    /// roofs. Streams in model mode (truth when --modes names truth and not model); writes
+    /// catalog.md and catalog.json; exit 7 when a gated mode returned an unsafe, not stale, site.
+    #[arg(long)]
+    pub catalog: bool,
+    /// With `--catalog`: how long to wait after each visit for the catalog to show its
+    /// confirmations, seconds: at most this, and a third of it without change once one shows
+    /// (keep it at least 3 × the server's `catalog.flush_interval_s`, 1 s by default).
+    #[arg(long, default_value_t = 4.0, value_parser = parse_tolerance)]
+    pub catalog_wait: f64,
 }
 
 /// The built-in scenario sets.
@@ -183,6 +199,9 @@ pub async fn eval_cmd(
         });
     }
     let config = eval_config(args);
+    if args.catalog {
+        return catalog_cmd(connection, args, config, json, out).await;
+    }
     let mut scenarios = scenarios(args)?;
     for s in &mut scenarios {
         fill_scanned_regions(s, config.roof_band_m)?;
@@ -199,6 +218,64 @@ pub async fn eval_cmd(
     write_report(&args.out, &summary, &records, &targets, &args.gate)?;
     print_summary(out, json, &summary, &targets, args)?;
     Ok(if summary.gate_failed(&args.gate) {
+        EXIT_UNSAFE
+    } else {
+        exit::OK
+    })
+}
+
+/// `landing eval --catalog`: streams the revisit set and scores the catalog after each visit
+/// ([`landing_eval::catalog`]); prints the table (or JSON) and writes catalog.md and catalog.json.
+async fn catalog_cmd(
+    connection: &ConnectionArgs,
+    args: &EvalArgs,
+    eval: landing_eval::run::EvalConfig,
+    json: bool,
+    out: &mut (dyn Write + Send),
+) -> Result<u8, CliError> {
+    let mode = if args.modes.contains(&Mode::Model) || !args.modes.contains(&Mode::Truth) {
+        Mode::Model
+    } else {
+        Mode::Truth
+    };
+    let config = CatalogConfig {
+        mode,
+        eval: EvalConfig {
+            stream: Some(FusionOptions::default()),
+            ..eval
+        },
+        wait: std::time::Duration::from_secs_f64(args.catalog_wait),
+        min_truth_radius_m: args.min_truth_radius,
+    };
+    if args.limit != 0 || args.scenarios.is_some() {
+        return Err(CliError {
+            code: exit::USAGE,
+            message: "--catalog takes a whole revisit set (`landing-sim scenarios --revisits N`): no --limit, no --scenarios".into(),
+        });
+    }
+    let scenarios = scenarios(args)?;
+    let client = LandingClient::connect(client_config(connection)?).await?;
+    let report = run_catalog(&client, &scenarios, &config, |done, total| {
+        eprintln!("landing eval --catalog: {done}/{total} visits");
+    })
+    .await?;
+    write_catalog_report(&args.out, &report)?;
+    let io = |e: std::io::Error| CliError {
+        code: exit::ERROR,
+        message: format!("cannot write output: {e}"),
+    };
+    if json {
+        let v = serde_json::to_string_pretty(&report).map_err(|e| CliError {
+            code: exit::ERROR,
+            message: e.to_string(),
+        })?;
+        writeln!(out, "{v}").map_err(io)?;
+    } else {
+        write!(out, "{}", report.to_text()).map_err(io)?;
+        writeln!(out, "report: {}", args.out.join("catalog.md").display()).map_err(io)?;
+    }
+    let gated = args.gate.contains(&mode);
+    Ok(if gated && report.has_unsafe() {
         EXIT_UNSAFE
     } else {
         exit::OK

@@ -57,6 +57,7 @@
 #![forbid(unsafe_code)]
 
 pub mod approach;
+pub mod catalog;
 pub mod geom;
 pub mod metrics;
 pub mod overlay;

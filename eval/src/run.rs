@@ -218,20 +218,7 @@ pub async fn run(
     config: &EvalConfig,
     mut progress: impl FnMut(usize, usize),
 ) -> Result<(Vec<FrameRecord>, Vec<FrameFailure>), EvalError> {
-    let info = client.info().await?;
-    let tolerance = config
-        .tolerance_m
-        .or(config.options.polylabel_precision_m)
-        .or_else(|| {
-            info.default_options
-                .as_ref()
-                .and_then(|o| o.polylabel_precision_m)
-        })
-        .unwrap_or(config.metrics.tolerance_m);
-    let params = MetricsParams {
-        tolerance_m: tolerance,
-        ..config.metrics.clone()
-    };
+    let params = scoring_params(client, config).await?;
     let passes = if config.stream.is_some() { 2 } else { 1 };
     let total = scenarios.len() * passes;
     let mut records = Vec::new();
@@ -273,6 +260,28 @@ pub async fn run(
         failures.extend(f);
     }
     Ok((records, failures))
+}
+
+/// The metric parameters the answers are judged with: the safety tolerance is
+/// [`EvalConfig::tolerance_m`], else the request's polylabel precision, else the server's.
+pub async fn scoring_params(
+    client: &LandingClient,
+    config: &EvalConfig,
+) -> Result<MetricsParams, EvalError> {
+    let info = client.info().await?;
+    let tolerance = config
+        .tolerance_m
+        .or(config.options.polylabel_precision_m)
+        .or_else(|| {
+            info.default_options
+                .as_ref()
+                .and_then(|o| o.polylabel_precision_m)
+        })
+        .unwrap_or(config.metrics.tolerance_m);
+    Ok(MetricsParams {
+        tolerance_m: tolerance,
+        ..config.metrics.clone()
+    })
 }
 
 /// The approaches of `scenarios`: the indices of each recording's frames, in approach order

@@ -29,6 +29,21 @@ pub fn enu_to_geodetic(origin: Geodetic, enu: [f64; 3]) -> Geodetic {
     ecef_to_geodetic([x0 + dx, y0 + dy, z0 + dz])
 }
 
+/// The local ENU coordinates (east, north, up metres) of `g` in the frame whose origin is
+/// `origin`: the inverse of [`enu_to_geodetic`].
+pub fn geodetic_to_enu(origin: Geodetic, g: Geodetic) -> [f64; 3] {
+    let [x0, y0, z0] = geodetic_to_ecef(origin);
+    let [x, y, z] = geodetic_to_ecef(g);
+    let (dx, dy, dz) = (x - x0, y - y0, z - z0);
+    let (slat, clat) = origin.latitude_deg.to_radians().sin_cos();
+    let (slon, clon) = origin.longitude_deg.to_radians().sin_cos();
+    [
+        -slon * dx + clon * dy,
+        -slat * clon * dx - slat * slon * dy + clat * dz,
+        clat * clon * dx + clat * slon * dy + slat * dz,
+    ]
+}
+
 /// Earth-centred, earth-fixed coordinates of a geodetic position.
 pub fn geodetic_to_ecef(g: Geodetic) -> [f64; 3] {
     let (slat, clat) = g.latitude_deg.to_radians().sin_cos();
@@ -147,5 +162,15 @@ mod tests {
         );
         let up = enu_to_geodetic(ZURICH, [0.0, 0.0, 50.0]);
         assert!((up.altitude_m - ZURICH.altitude_m - 50.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn enu_round_trip() {
+        for enu in [[0.0, 0.0, 0.0], [12.5, -40.0, 31.0], [-950.0, 1200.0, -5.0]] {
+            let back = geodetic_to_enu(ZURICH, enu_to_geodetic(ZURICH, enu));
+            for k in 0..3 {
+                assert!((back[k] - enu[k]).abs() < 1e-6, "{enu:?} {back:?}");
+            }
+        }
     }
 }

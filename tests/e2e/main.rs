@@ -8,6 +8,7 @@ mod catalog;
 mod cli;
 mod detect;
 mod errors;
+mod eval_catalog;
 mod fusion;
 mod health_reflection;
 mod live_view;
