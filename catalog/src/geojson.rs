@@ -256,6 +256,22 @@ fn find_number(
     Ok(None)
 }
 
+/// A polygon as a store keeps it (the GeoJSON geometry [`polygon_geometry`] wrote); what cannot be
+/// read back is [`Error::Corrupt`] in `backend`.
+pub(crate) fn stored_polygon(text: &str, backend: &'static str) -> Result<Polygon> {
+    let corrupt = |e: &dyn std::fmt::Display| Error::Corrupt {
+        backend,
+        what: format!("a stored polygon: {e}"),
+    };
+    let v: serde_json::Value = serde_json::from_str(text).map_err(|e| corrupt(&e))?;
+    polygon_from_coordinates(&v["coordinates"], "polygon").map_err(|e| corrupt(&e))
+}
+
+/// A count as the stores keep it (a signed 64-bit column), saturating.
+pub(crate) fn stored_count(n: u64) -> i64 {
+    i64::try_from(n).unwrap_or(i64::MAX)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

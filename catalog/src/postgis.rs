@@ -40,7 +40,7 @@ use postgres::{Client, NoTls, Row, Statement, Transaction};
 use crate::apply::{WriteTx, apply_sorted, validate};
 use crate::error::{Error, Result};
 use crate::geo::{Bbox, LatLon, Polygon};
-use crate::geojson::{polygon_from_coordinates, polygon_geometry};
+use crate::geojson::{polygon_geometry, stored_count, stored_polygon};
 use crate::model::{Candidate, Observation, Site, SiteId, SiteKind};
 use crate::query::{Found, Order, Resolved, SearchPage, SearchQuery};
 use crate::rule::ApplyReport;
@@ -437,7 +437,12 @@ impl WriteTx for PgTx<'_, '_> {
             )
             .map_err(db)?;
         rows.iter()
-            .map(|r| Ok((Timestamp::from_unix_ms(r.get(0)), parse_polygon(r.get(1))?)))
+            .map(|r| {
+                Ok((
+                    Timestamp::from_unix_ms(r.get(0)),
+                    stored_polygon(r.get(1), BACKEND)?,
+                ))
+            })
             .collect()
     }
 
@@ -466,8 +471,8 @@ impl WriteTx for PgTx<'_, '_> {
                     &s.area_m2,
                     &s.first_seen.unix_ms(),
                     &s.last_confirmed.unix_ms(),
-                    &clamp_i64(s.frames),
-                    &clamp_i64(s.approaches),
+                    &stored_count(s.frames),
+                    &stored_count(s.approaches),
                     &s.drone_id,
                     &s.approach_id,
                     &s.model_id,
@@ -502,8 +507,8 @@ impl WriteTx for PgTx<'_, '_> {
                     &s.area_m2,
                     &s.first_seen.unix_ms(),
                     &s.last_confirmed.unix_ms(),
-                    &clamp_i64(s.frames),
-                    &clamp_i64(s.approaches),
+                    &stored_count(s.frames),
+                    &stored_count(s.approaches),
                     &s.drone_id,
                     &s.approach_id,
                     &s.model_id,
@@ -601,7 +606,7 @@ fn site_from_row(r: &Row) -> Result<Site> {
     Ok(Site {
         id: SiteId(r.get(0)),
         kind,
-        polygon: parse_polygon(r.get(2))?,
+        polygon: stored_polygon(r.get(2), BACKEND)?,
         center: LatLon::new(r.get(3), r.get(4)),
         safe_radius_m: r.get(5),
         plane_height_m: r.get(6),
@@ -615,17 +620,6 @@ fn site_from_row(r: &Row) -> Result<Site> {
         model_id: r.get(14),
         source_id: r.get(15),
     })
-}
-
-fn parse_polygon(text: &str) -> Result<Polygon> {
-    let corrupt = |what: String| Error::Corrupt {
-        backend: BACKEND,
-        what,
-    };
-    let v: serde_json::Value =
-        serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
-    polygon_from_coordinates(&v["coordinates"], "polygon")
-        .map_err(|e| corrupt(format!("a stored polygon: {e}")))
 }
 
 /// One record as a line of `COPY … FROM STDIN` text (the columns of [`Store::load_sites`]).
@@ -667,8 +661,8 @@ fn copy_line(out: &mut String, s: &Site) {
         s.area_m2,
         s.first_seen.unix_ms(),
         s.last_confirmed.unix_ms(),
-        clamp_i64(s.frames),
-        clamp_i64(s.approaches),
+        stored_count(s.frames),
+        stored_count(s.approaches),
     );
     for text in [&s.drone_id, &s.approach_id, &s.model_id] {
         out.push('\t');
@@ -700,10 +694,6 @@ fn kind_code(kind: SiteKind) -> i16 {
         SiteKind::Confirmed => 0,
         SiteKind::Candidate => 1,
     }
-}
-
-fn clamp_i64(n: u64) -> i64 {
-    i64::try_from(n).unwrap_or(i64::MAX)
 }
 
 fn disconnected() -> Error {

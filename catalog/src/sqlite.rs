@@ -35,7 +35,7 @@ use rusqlite::{Connection, OptionalExtension, Row, Transaction, TransactionBehav
 use crate::apply::{BOX_PAD_M, WriteTx, apply_sorted, validate};
 use crate::error::{Error, Result};
 use crate::geo::{Bbox, LatLon, Polygon, distance_m};
-use crate::geojson::{polygon_from_coordinates, polygon_geometry};
+use crate::geojson::{polygon_geometry, stored_count, stored_polygon};
 use crate::model::{Candidate, Observation, Site, SiteId, SiteKind};
 use crate::query::{Found, Order, Resolved, SearchPage, SearchQuery, order_group};
 use crate::rule::ApplyReport;
@@ -367,7 +367,7 @@ impl WriteTx for SqliteTx<'_> {
         let mut out = Vec::new();
         for row in rows {
             let (ms, text) = row.map_err(db)?;
-            out.push((Timestamp::from_unix_ms(ms), parse_polygon(&text)?));
+            out.push((Timestamp::from_unix_ms(ms), stored_polygon(&text, BACKEND)?));
         }
         Ok(out)
     }
@@ -391,8 +391,8 @@ impl WriteTx for SqliteTx<'_> {
                 s.area_m2,
                 s.first_seen.unix_ms(),
                 s.last_confirmed.unix_ms(),
-                clamp_i64(s.frames),
-                clamp_i64(s.approaches),
+                stored_count(s.frames),
+                stored_count(s.approaches),
                 s.drone_id,
                 s.approach_id,
                 s.model_id,
@@ -423,8 +423,8 @@ impl WriteTx for SqliteTx<'_> {
                 s.area_m2,
                 s.first_seen.unix_ms(),
                 s.last_confirmed.unix_ms(),
-                clamp_i64(s.frames),
-                clamp_i64(s.approaches),
+                stored_count(s.frames),
+                stored_count(s.approaches),
                 s.drone_id,
                 s.approach_id,
                 s.model_id,
@@ -631,7 +631,7 @@ fn site_from_row(r: &Row<'_>) -> rusqlite::Result<Result<Site>> {
         _ => SiteKind::Candidate,
     };
     let polygon_text: String = r.get(2)?;
-    let polygon = match parse_polygon(&polygon_text) {
+    let polygon = match stored_polygon(&polygon_text, BACKEND) {
         Ok(p) => p,
         Err(e) => return Ok(Err(e)),
     };
@@ -654,26 +654,11 @@ fn site_from_row(r: &Row<'_>) -> rusqlite::Result<Result<Site>> {
     }))
 }
 
-fn parse_polygon(text: &str) -> Result<Polygon> {
-    let corrupt = |what: String| Error::Corrupt {
-        backend: BACKEND,
-        what,
-    };
-    let v: serde_json::Value =
-        serde_json::from_str(text).map_err(|e| corrupt(format!("a stored polygon: {e}")))?;
-    polygon_from_coordinates(&v["coordinates"], "polygon")
-        .map_err(|e| corrupt(format!("a stored polygon: {e}")))
-}
-
 fn kind_code(kind: SiteKind) -> i64 {
     match kind {
         SiteKind::Confirmed => 0,
         SiteKind::Candidate => 1,
     }
-}
-
-fn clamp_i64(n: u64) -> i64 {
-    i64::try_from(n).unwrap_or(i64::MAX)
 }
 
 fn db(e: rusqlite::Error) -> Error {
