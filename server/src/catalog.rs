@@ -125,11 +125,12 @@ impl Catalog {
 
     /// One page of a search; blocks on the database (call it off the async runtime).
     pub fn search(&self, query: &SearchQuery) -> Result<SearchPage, Error> {
-        // A bad request is the caller's to fix whether or not the store is open.
-        query.validate(Timestamp::now())?;
         let reader = match &*self.shared.reader.read().unwrap_or_else(|e| e.into_inner()) {
             Ok(store) => store.clone(),
             Err(why) => {
+                // A bad request is the caller's to fix whether or not the store is open; an open
+                // store checks the request itself.
+                query.validate(Timestamp::now())?;
                 return Err(Error::CatalogUnavailable(format!(
                     "{:?} is not open: {why}",
                     self.shared.location
