@@ -11,7 +11,7 @@
 #                 the GPU recipe's cargo flags resolve and turn on ort's `cuda` feature (cargo tree)
 #   4. contract   both server TOML files use only the config contract's sections, keys and types
 #   5. manifests  renders base, cpu, gpu, fleet, cpu/gpu with every component (tls, servicemonitor,
-#                 networkpolicy), fleet with tls, servicemonitor and postgis, and gpu+fleet with
+#                 networkpolicy), fleet with tls, servicemonitor, postgis and networkpolicy-fleet, and gpu+fleet with
 #                 `kubectl kustomize`; strict schema validation for Kubernetes 1.30 and 1.37; policy
 #                 (security context, probes vs ports, drain grace, selectors, references, GPU, the
 #                 catalog's storage: SQLite on a RWO claim with 1 replica and Recreate, or the fleet's

@@ -65,11 +65,12 @@ CUSTOM_KINDS = {("monitoring.coreos.com/v1", "ServiceMonitor")}
 # The renders: name -> kustomization directory relative to deploy/k8s, plus components.
 OVERLAYS = ("cpu", "gpu", "fleet")
 # "<overlay>+components" adds these. The fleet's pods talk to PostgreSQL, so they get the test
-# database (postgis) instead of networkpolicy, which denies all egress.
+# database (postgis) and networkpolicy-fleet (DNS and PostgreSQL out) instead of networkpolicy,
+# which denies all egress.
 COMPONENTS = {
     "cpu": ("tls", "servicemonitor", "networkpolicy"),
     "gpu": ("tls", "servicemonitor", "networkpolicy"),
-    "fleet": ("tls", "servicemonitor", "postgis"),
+    "fleet": ("tls", "servicemonitor", "postgis", "networkpolicy-fleet"),
 }
 # Further renders: (overlay, components). A GPU fleet is the gpu overlay with the fleet component.
 EXTRA_RENDERS = {"gpu+fleet": ("gpu", ("fleet",))}
@@ -77,6 +78,7 @@ EXTRA_RENDERS = {"gpu+fleet": ("gpu", ("fleet",))}
 # The catalog (issue 41): SQLite on a PersistentVolumeClaim (one writer), or PostgreSQL + PostGIS
 # with the URL, password included, from a Secret.
 CATALOG_URL_ENV = "LANDING__CATALOG__URL"
+POSTGRES_PORT = 5432
 SINGLE_WRITER_ACCESS_MODES = {"ReadWriteOnce", "ReadWriteOncePod"}
 # scheme://user:password@ — a password written into a manifest.
 CREDENTIAL_URL = re.compile(r"[a-z][a-z0-9+.-]*://[^/\s:@]+:([^@\s/]+)@", re.I)
@@ -338,6 +340,20 @@ def selector_matches(selector: dict, labels: dict) -> bool:
     return bool(selector) and all(labels.get(k) == v for k, v in selector.items())
 
 
+def server_policies(r: Render, pod_labels: dict) -> list[dict]:
+    """The NetworkPolicies that select the server's pods."""
+    return [np for np in r.of_kind("NetworkPolicy")
+            if selector_matches(np["spec"].get("podSelector", {}).get("matchLabels", {}), pod_labels)]
+
+
+def egress_allows(rules: list[dict], port: int, protocol: str) -> bool:
+    """Whether one of a policy's egress rules lets `protocol` traffic out to `port` (a rule with no
+    ports allows every port; a port's protocol defaults to TCP)."""
+    return any(not rule.get("ports") or any(p.get("port") == port and p.get("protocol", "TCP") == protocol
+                                            for p in rule["ports"])
+               for rule in rules)
+
+
 def check_pod_security(r: Render, pod: dict, container: dict, c: str, owner: str, uid_note: str) -> None:
     """The restricted Pod Security Standard and resources, for one container of a pod template."""
     # Security context (pod or container level, container wins).
@@ -398,9 +414,10 @@ def plaintext_passwords(obj: dict, where: str) -> list[str]:
     return problems
 
 
-def check_postgis(r: Render, sts: dict, services: list[dict]) -> None:
+def check_postgis(r: Render, sts: dict, services: list[dict], server_labels: dict) -> None:
     """The test database's StatefulSet (components/postgis): restricted security context, resources,
-    a pg_isready readiness probe, its data on a volumeClaimTemplate, a Service selecting it."""
+    a pg_isready readiness probe, its data on a volumeClaimTemplate, a Service selecting it, and a
+    NetworkPolicy selecting it admits the server's pods only."""
     sname = f"StatefulSet/{sts['metadata']['name']}"
     pod = sts["spec"]["template"]["spec"]
     labels = sts["spec"]["template"]["metadata"].get("labels", {})
@@ -420,6 +437,18 @@ def check_postgis(r: Render, sts: dict, services: list[dict]) -> None:
     if not any(s["metadata"]["name"] == sts["spec"].get("serviceName") and selector_matches(s["spec"].get("selector", {}), labels)
                for s in services):
         r.fail(f"{sname}: no Service {sts['spec'].get('serviceName')!r} selects its pods")
+    for np in r.of_kind("NetworkPolicy"):
+        spec_np = np["spec"]
+        if not selector_matches(spec_np.get("podSelector", {}).get("matchLabels", {}), labels):
+            continue
+        rules = spec_np.get("ingress", [])
+        if not any(any(selector_matches(peer.get("podSelector", {}).get("matchLabels", {}), server_labels)
+                       for peer in rule.get("from", []))
+                   and any(p.get("port") in ("postgres", POSTGRES_PORT) for p in rule.get("ports", []))
+                   for rule in rules):
+            r.fail(f"NetworkPolicy/{np['metadata']['name']}: ingress does not admit the server's pods to the postgres port")
+        if any(not rule.get("from") for rule in rules):
+            r.fail(f"NetworkPolicy/{np['metadata']['name']}: an ingress rule without `from` admits every pod to the database")
 
 
 def check_render(r: Render, out_dir: Path | None) -> None:
@@ -599,12 +628,18 @@ def check_render(r: Render, out_dir: Path | None) -> None:
             if claim_volume is not None:
                 r.fail(f"Deployment/{dname}: the catalog URL comes from a Secret, yet a PersistentVolumeClaim is "
                        f"mounted at {parent}: a fleet shares PostgreSQL, not a volume")
-            for np in r.of_kind("NetworkPolicy"):
+            for np in server_policies(r, pod_labels):
                 spec_np = np["spec"]
-                if "Egress" in spec_np.get("policyTypes", []) and not spec_np.get("egress") \
-                        and selector_matches(spec_np.get("podSelector", {}).get("matchLabels", {}), pod_labels):
-                    r.fail(f"NetworkPolicy/{np['metadata']['name']} denies all egress: the catalog's PostgreSQL is "
+                if "Egress" not in spec_np.get("policyTypes", []):
+                    continue
+                npn = f"NetworkPolicy/{np['metadata']['name']}"
+                if not spec_np.get("egress"):
+                    r.fail(f"{npn} denies all egress: the catalog's PostgreSQL is "
                            "unreachable (allow DNS and the database's port)")
+                    continue
+                for port, protocol, what in ((53, "UDP", "DNS"), (POSTGRES_PORT, "TCP", "the catalog's PostgreSQL")):
+                    if not egress_allows(spec_np["egress"], port, protocol):
+                        r.fail(f"{npn}: egress does not allow {protocol} port {port} ({what})")
         elif claim_volume is None:
             r.fail(f"catalog.path = {catalog.get('path')!r}: no PersistentVolumeClaim is mounted at {parent} "
                    f"(the SQLite file would be unwritable or lost with the pod); or set {CATALOG_URL_ENV} from a Secret")
@@ -630,7 +665,7 @@ def check_render(r: Render, out_dir: Path | None) -> None:
     all_services = r.of_kind("Service")
     services = [s for s in all_services if not s["metadata"]["name"].startswith("landing-postgis")]
     for sts in r.of_kind("StatefulSet"):
-        check_postgis(r, sts, all_services)
+        check_postgis(r, sts, all_services, pod_labels)
     if not services:
         r.fail("no Service")
     for s in services:
@@ -677,10 +712,15 @@ def check_render(r: Render, out_dir: Path | None) -> None:
         if "prometheus.io/scrape" in spec["template"]["metadata"].get("annotations", {}):
             r.fail("ServiceMonitor together with prometheus.io/scrape annotations scrapes every pod twice")
 
-    # NetworkPolicy: selects the pods and lets in the ports the Services use.
+    # NetworkPolicy: selects the pods and lets in the ports the Services use (the test database's
+    # own policy is checked with its StatefulSet).
+    database_labels = [sts["spec"]["template"]["metadata"].get("labels", {}) for sts in r.of_kind("StatefulSet")]
     for np in r.of_kind("NetworkPolicy"):
         npn = f"NetworkPolicy/{np['metadata']['name']}"
-        if not selector_matches(np["spec"].get("podSelector", {}).get("matchLabels", {}), pod_labels):
+        selector = np["spec"].get("podSelector", {}).get("matchLabels", {})
+        if any(selector_matches(selector, labels) for labels in database_labels):
+            continue
+        if not selector_matches(selector, pod_labels):
             r.fail(f"{npn}: podSelector does not match the Deployment's pod labels")
         allowed = {p.get("port") for rule in np["spec"].get("ingress", []) for p in rule.get("ports", [])}
         for name, number in ports.items():
@@ -906,6 +946,10 @@ def mutations() -> list[tuple[str, str, object]]:
 
     def sts(objs):
         return next(o for o in objs if o["kind"] == "StatefulSet")
+    def server_np(objs):
+        return next(o for o in objs if o["kind"] == "NetworkPolicy" and o["metadata"]["name"] == "landing-server")
+    def db_np(objs):
+        return next(o for o in objs if o["kind"] == "NetworkPolicy" and o["metadata"]["name"] == "landing-postgis")
     def sts_ctr(objs):
         return sts(objs)["spec"]["template"]["spec"]["containers"][0]
     def set_env(container, name, **entry):
@@ -941,6 +985,11 @@ def mutations() -> list[tuple[str, str, object]]:
         ("fleet", "denies all egress", lambda o: o.append(copy.deepcopy(deny_egress))),
         ("fleet+components", "plaintext password: env POSTGRES_PASSWORD", lambda o: set_env(sts_ctr(o), "POSTGRES_PASSWORD", value="hunter2")),
         ("fleet+components", "pg_isready", lambda o: sts_ctr(o).pop("readinessProbe")),
+        ("fleet+components", "egress does not allow UDP port 53 (DNS)", lambda o: server_np(o)["spec"]["egress"].pop(0)),
+        ("fleet+components", "egress does not allow TCP port 5432", lambda o: server_np(o)["spec"]["egress"].pop()),
+        ("fleet+components", "does not admit the server's pods to the postgres port",
+         lambda o: db_np(o)["spec"]["ingress"][0]["from"][0]["podSelector"]["matchLabels"].update({"app.kubernetes.io/name": "x"})),
+        ("fleet+components", "admits every pod to the database", lambda o: db_np(o)["spec"]["ingress"].append({"ports": [{"port": 5432}]})),
         ("fleet+components", "postgis].securityContext.runAsNonRoot",
          lambda o: (sts(o)["spec"]["template"]["spec"]["securityContext"].pop("runAsNonRoot"), sts_ctr(o)["securityContext"].pop("runAsNonRoot"))),
         ("fleet+components", "postgis].resources.limits.memory", lambda o: sts_ctr(o)["resources"]["limits"].pop("memory")),
