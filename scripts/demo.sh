@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The main job on the embedded default: set up, build, start the service with the shipped model,
-# replay the sample recording through it (ranked sites per frame), replay it fused with a WGS-84
-# origin and print the landing sites the catalog now knows near its roofs, write overlay PNGs of a
-# few frames to out/ (camera view + top-down, like the paper's Fig. 4), then stop the server.
+# replay the sample recording through it as a fused stream placed in midtown Manhattan (ranked sites
+# per frame; the stream feeds the fleet's catalog), print the landing sites the catalog now knows
+# near its roofs, write overlay PNGs of a few frames to out/ (camera view + top-down, like the
+# paper's Fig. 4), then stop the server.
 # Installs only what that needs: the ONNX Runtime library (scripts/setup.sh); no Python.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
@@ -22,12 +23,12 @@ server_pid=$!
 for _ in $(seq 1 150); do "$bin/landing" info --server "http://$addr" >/dev/null 2>&1 && break; sleep 0.2; done
 
 "$bin/landing" info --server "http://$addr"
-"$bin/landing" replay samples/rooftops.mcap --server "http://$addr"
-
-# The fleet's catalog (the server's default: SQLite in data/catalog.sqlite): the same approach,
-# fused and placed in midtown Manhattan, feeds it; then ask what it knows near the sample's roofs.
+# Streams fuse by default; a WGS-84 origin gives the sites latitude and longitude and lets the
+# stream feed the fleet's catalog (the server's default: SQLite in data/catalog.sqlite).
 origin=40.7536,-73.9832
-"$bin/landing" replay samples/rooftops.mcap --fuse --origin "$origin" --server "http://$addr" >/dev/null
+"$bin/landing" replay samples/rooftops.mcap --origin "$origin" --server "http://$addr"
+
+# Ask the catalog what it knows near the sample's roofs.
 # The catalog's writer gathers a batch for up to catalog.flush_interval_s (1 s): ask until it
 # answers with a site, for at most 10 s, then show what it knows.
 for _ in $(seq 1 50); do

@@ -2,13 +2,19 @@
 # Load-test matrix: `landing loadtest` throughput and latency for 1, 2, 4, 8, 16 streams with
 # segmentation by the server's model, by the recording's label images sent as class images (a
 # drone that segments on board), and off (geometry only), against a release server started
-# here. Prints one Markdown table row per run; the JSON summaries go to $OUT_DIR.
+# here. Streams are single-frame (`--single-frame`, the paper's method; `MODE=fused` for the
+# default fused streams). Prints one Markdown table row per run; the JSON summaries go to $OUT_DIR.
 #
 #   cargo build --release -p landing-server -p landing-cli
 #   cli/scripts/loadtest-matrix.sh [DURATION_S] [STREAMS...]
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 DURATION=${1:-10}
+case "${MODE:-single-frame}" in
+  single-frame) mode_flag=(--single-frame) ;;
+  fused) mode_flag=() ;;
+  *) echo "MODE is single-frame or fused, not $MODE" >&2; exit 2 ;;
+esac
 shift || true
 STREAMS=${*:-1 2 4 8 16}
 PORT=${PORT:-50081}
@@ -35,7 +41,7 @@ for seg in model class-image none; do
   for n in $STREAMS; do
     json="$OUT_DIR/$seg-$n.json"
     "$LANDING" --server "http://127.0.0.1:$PORT" loadtest "$REC" --streams "$n" --duration "$DURATION" \
-      --window "$WINDOW" --segmentation "$seg" --json >"$json" || true
+      --window "$WINDOW" --segmentation "$seg" "${mode_flag[@]}" --json >"$json" || true
     python3 - "$json" "$seg" "$n" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))

@@ -153,10 +153,10 @@ pub struct ReplayArgs {
     /// Frames in flight at once.
     #[arg(long, default_value_t = 4)]
     pub window: usize,
-    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
-    /// (with the server's `[fusion]` defaults).
+    /// Judge every frame alone (the paper's single-frame method) instead of fusing the
+    /// stream's frames into a map (the default, with the server's `[fusion]` defaults).
     #[arg(long)]
-    pub fuse: bool,
+    pub single_frame: bool,
     /// The WGS-84 position of the recording's world origin, `LAT,LON[,ALT]` (degrees, metres
     /// above the ellipsoid), for frames that carry none: sites get latitude and longitude, and a
     /// fused replay feeds the server's landing-site catalog.
@@ -195,17 +195,18 @@ pub enum Overflow {
     Latest,
 }
 
-/// The stream the flags ask for: fused (with the server's `[fusion]` defaults) with `--fuse`.
+/// The stream the flags ask for: fused (with the server's `[fusion]` defaults) unless
+/// `--single-frame`.
 fn stream_config(
-    fuse: bool,
+    single_frame: bool,
     overflow: Overflow,
     window: usize,
     options: PipelineOptions,
 ) -> StreamConfig {
-    let stream = if fuse {
-        StreamConfig::fused()
-    } else {
+    let stream = if single_frame {
         StreamConfig::single_frame()
+    } else {
+        StreamConfig::fused()
     };
     StreamConfig {
         max_in_flight: window.max(1),
@@ -245,10 +246,10 @@ pub struct LoadtestArgs {
     /// What the server does when frames arrive faster than it works.
     #[arg(long, value_enum, default_value_t = Overflow::Block)]
     pub overflow: Overflow,
-    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
-    /// (with the server's `[fusion]` defaults).
+    /// Judge every frame alone (the paper's single-frame method) instead of fusing the
+    /// stream's frames into a map (the default, with the server's `[fusion]` defaults).
     #[arg(long)]
-    pub fuse: bool,
+    pub single_frame: bool,
     /// The WGS-84 position of the recordings' world origin, `LAT,LON[,ALT]`, for frames that
     /// carry none: fused streams then feed the server's landing-site catalog (its write path
     /// under load).
@@ -444,7 +445,7 @@ async fn replay(cli: &Cli, a: &ReplayArgs, out: &mut (dyn Write + Send)) -> Resu
         )?)),
         None => None,
     };
-    let config = stream_config(a.fuse, a.overflow, a.window, a.pipeline.options());
+    let config = stream_config(a.single_frame, a.overflow, a.window, a.pipeline.options());
     let summary = replay_frames(&client, &frames, config, a.rate, |rec, item| {
         if cli.json {
             writeln!(out, "{}", item_json(item))?;
@@ -600,7 +601,7 @@ async fn loadtest(
         streams: a.streams,
         rate_hz: a.rate,
         duration: Duration::from_secs_f64(a.duration),
-        stream: stream_config(a.fuse, a.overflow, a.window, a.pipeline.options()),
+        stream: stream_config(a.single_frame, a.overflow, a.window, a.pipeline.options()),
     };
     let show = std::io::stderr().is_terminal();
     let progress = move |answered: u64, elapsed: Duration| {
@@ -923,6 +924,7 @@ fn response_of(item: &StreamItem) -> StreamLandingSitesResponse {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use landing_client::StreamMode;
 
     #[test]
     fn help_lists_the_connection_flags_under_their_own_heading() {
@@ -960,13 +962,12 @@ mod tests {
         }
         assert_eq!(parse("auto").unwrap(), SegmentationMode::Unspecified);
         assert!(parse("unspecified").is_err());
-        let fused = stream_config(true, Overflow::Latest, 0, PipelineOptions::default());
-        assert!(fused.fusion.is_some());
+        let fused = stream_config(false, Overflow::Latest, 0, PipelineOptions::default());
+        assert!(matches!(fused.mode, StreamMode::Fused(_)));
         assert_eq!(fused.max_in_flight, 1);
-        assert!(
-            stream_config(false, Overflow::Block, 4, PipelineOptions::default())
-                .fusion
-                .is_none()
+        assert_eq!(
+            stream_config(true, Overflow::Block, 4, PipelineOptions::default()).mode,
+            StreamMode::SingleFrame
         );
     }
 

@@ -33,7 +33,6 @@ impl Default for LoadTestConfig {
             duration: Duration::from_secs(10),
             stream: StreamConfig {
                 max_in_flight: 4,
-                fusion: None,
                 ..StreamConfig::default()
             },
         }

@@ -376,6 +376,23 @@ fn endpoint(config: &ClientConfig) -> Result<Endpoint, ClientError> {
     Ok(ep)
 }
 
+/// How a stream's frames are answered.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum StreamMode {
+    /// Approach fusion (the default): each answer comes from the server's map of the stream's
+    /// frames so far, with these options (unset fields take the server's defaults,
+    /// `ServiceInfo.default_fusion`). The map lives in the server process that holds the
+    /// stream: when the stream breaks and the drone reconnects, possibly to another replica
+    /// after a drain, fusion starts over from the next frame. A fused answer's polygons end
+    /// halfway between the map's last landable points and the first points that are not; each
+    /// safe circle stays within the landable points, so it may lie farther from its polygon's
+    /// edge than its radius.
+    Fused(FusionOptions),
+    /// Every frame judged alone, as [`LandingClient::detect`] judges it (the paper's
+    /// single-frame method).
+    SingleFrame,
+}
+
 /// Settings of one stream.
 #[derive(Debug, Clone)]
 pub struct StreamConfig {
@@ -385,37 +402,19 @@ pub struct StreamConfig {
     pub options: Option<PipelineOptions>,
     /// At most this many frames are sent and unanswered at once.
     pub max_in_flight: usize,
-    /// Approach fusion: each answer comes from the server's map of the stream's frames so far
-    /// (sent with the first frame; `Some` fuses, with the server's defaults for the unset
-    /// fields; `None` judges every frame alone). The map lives in the server
-    /// process that holds the stream: when the stream breaks and the drone reconnects, possibly
-    /// to another replica after a drain, fusion starts over from the next frame. A fused
-    /// answer's polygons end halfway between the map's last landable points and the first points
-    /// that are not; each safe circle stays within the landable points, so it may lie farther
-    /// from its polygon's edge than its radius.
-    pub fusion: Option<FusionOptions>,
+    /// Fused (the default) or single frames; sent with the first frame.
+    pub mode: StreamMode,
 }
 
 impl Default for StreamConfig {
     fn default() -> Self {
-        Self::single_frame()
+        Self::fused()
     }
 }
 
 impl StreamConfig {
-    /// A stream whose every frame is judged alone, as [`LandingClient::detect`] judges it
-    /// (the `Default`).
-    pub fn single_frame() -> Self {
-        Self {
-            overflow_policy: OverflowPolicy::Block,
-            options: None,
-            max_in_flight: 16,
-            fusion: None,
-        }
-    }
-
     /// A fused stream with the server's fusion defaults (`ServiceInfo.default_fusion`): each
-    /// answer comes from the map of the stream's frames so far.
+    /// answer comes from the map of the stream's frames so far (the `Default`).
     pub fn fused() -> Self {
         Self::fused_with(FusionOptions::default())
     }
@@ -423,8 +422,18 @@ impl StreamConfig {
     /// A fused stream with these fusion options (unset fields take the server's defaults).
     pub fn fused_with(fusion: FusionOptions) -> Self {
         Self {
-            fusion: Some(fusion),
-            ..Self::single_frame()
+            overflow_policy: OverflowPolicy::Block,
+            options: None,
+            max_in_flight: 16,
+            mode: StreamMode::Fused(fusion),
+        }
+    }
+
+    /// A stream whose every frame is judged alone, as [`LandingClient::detect`] judges it.
+    pub fn single_frame() -> Self {
+        Self {
+            mode: StreamMode::SingleFrame,
+            ..Self::fused()
         }
     }
 
@@ -490,10 +499,12 @@ impl FrameSender {
             pending.push_back((seq, Instant::now()));
         }
         permit.forget();
-        let (overflow_policy, fusion) = if self.first {
-            (self.config.overflow_policy as i32, self.config.fusion)
-        } else {
-            (0, None)
+        let (overflow_policy, fusion, single_frame) = match (self.first, self.config.mode) {
+            (false, _) => (0, None, false),
+            (true, StreamMode::Fused(fusion)) => {
+                (self.config.overflow_policy as i32, Some(fusion), false)
+            }
+            (true, StreamMode::SingleFrame) => (self.config.overflow_policy as i32, None, true),
         };
         self.first = false;
         slot.send(StreamLandingSitesRequest {
@@ -502,6 +513,7 @@ impl FrameSender {
             overflow_policy,
             fusion,
             reset_fusion: std::mem::take(&mut self.reset_next),
+            single_frame,
         });
         Ok(())
     }

@@ -32,15 +32,15 @@
 //! # Ok(()) }
 //! ```
 //!
-//! What can be checked without a server: a fused stream is one that carries fusion options, and
-//! no setting can ask for fusion that is not done.
+//! Streams fuse unless they opt out: `StreamConfig::single_frame()` judges every frame alone, as
+//! `detect` does (the paper's single-frame method), and no setting can send fusion options that
+//! are not applied.
 //!
 //! ```
-//! use landing_client::StreamConfig;
+//! use landing_client::{StreamConfig, StreamMode};
 //!
-//! assert!(StreamConfig::fused().fusion.is_some());
-//! assert!(StreamConfig::single_frame().fusion.is_none());
-//! assert!(StreamConfig::default().fusion.is_none());
+//! assert!(matches!(StreamConfig::default().mode, StreamMode::Fused(_)));
+//! assert_eq!(StreamConfig::single_frame().mode, StreamMode::SingleFrame);
 //! ```
 //!
 //! The crate is what a fleet back end adds to its build: tonic, prost, tokio and what they need.
@@ -102,7 +102,9 @@ mod frame;
 mod outcome;
 mod search;
 
-pub use client::{FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig};
+pub use client::{
+    FrameSender, LandingClient, ResultStream, ServingStatus, StreamConfig, StreamMode,
+};
 pub use config::{ClientConfig, DEFAULT_SERVER, RetryPolicy, TlsConfig};
 pub use error::ClientError;
 pub use frame::{

@@ -16,7 +16,7 @@ use crate::geom::{P2, Polygon2, convex_hull};
 use crate::metrics::{MetricsParams, RoofTruth, Site, evaluate_frame};
 use crate::report::{FrameFailure, FrameRecord, FusionInfo, Mode, STEPS, column_name};
 use landing_client::{
-    ClientError, FrameError, FrameOutcome, LandingClient, StreamConfig, StreamItem,
+    ClientError, FrameError, FrameOutcome, LandingClient, StreamConfig, StreamItem, StreamMode,
 };
 
 use crate::EvalError;
@@ -357,7 +357,7 @@ async fn stream_approach(
         overflow_policy: OverflowPolicy::Block,
         options: Some(mode_options(config, mode)),
         max_in_flight: window,
-        fusion: Some(*fusion),
+        mode: StreamMode::Fused(*fusion),
     });
     let mut scoring = StreamScoring::new(frames, roofs, mode, config, params);
     // Sending and receiving alternate on this task: a frame is only sent while the window has

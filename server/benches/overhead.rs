@@ -237,6 +237,7 @@ fn main() {
                 }),
                 options: Some(options(mode)),
                 overflow_policy: v1::OverflowPolicy::Block as i32,
+                single_frame: true,
                 ..Default::default()
             })
             .collect();

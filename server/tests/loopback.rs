@@ -74,6 +74,7 @@ fn stream_request(frame: v1::Frame, policy: v1::OverflowPolicy) -> v1::StreamLan
         frame: Some(frame),
         options: None,
         overflow_policy: policy as i32,
+        single_frame: true,
         ..Default::default()
     }
 }
@@ -160,6 +161,57 @@ async fn stream_with_a_bad_frame_in_the_middle_goes_on() {
             }
             Outcome::Skipped(s) => panic!("BLOCK never skips: {s:?}"),
         }
+    }
+    server.shutdown().await.unwrap();
+}
+
+/// Streams fuse unless their first message asks for `single_frame`; asking for both is refused
+/// on every frame, naming `fusion`.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn streams_fuse_unless_the_first_message_asks_for_single_frames() {
+    let (server, channel) = start_with(config()).await;
+    let requests = |single_frame: bool, fusion: Option<v1::FusionOptions>| -> Vec<_> {
+        (1..=3)
+            .map(|i| v1::StreamLandingSitesRequest {
+                single_frame: single_frame && i == 1,
+                fusion: fusion.filter(|_| i == 1),
+                ..stream_request(frame(7, i), v1::OverflowPolicy::Block)
+            })
+            .collect()
+    };
+    let results = |responses: Vec<v1::StreamLandingSitesResponse>| -> Vec<v1::FrameResult> {
+        assert_eq!(responses.len(), 3, "one answer per frame");
+        responses
+            .into_iter()
+            .map(|r| match r.outcome {
+                Some(Outcome::Result(result)) => result,
+                other => panic!("{other:?}"),
+            })
+            .collect()
+    };
+
+    let fused = results(stream_all(&channel, requests(false, None)).await);
+    let frames: Vec<u32> = fused
+        .iter()
+        .map(|r| r.fusion.as_ref().unwrap().frames)
+        .collect();
+    assert_eq!(
+        frames,
+        vec![1, 2, 3],
+        "a stream with no fusion options is fused"
+    );
+    let single = results(stream_all(&channel, requests(true, None)).await);
+    assert!(single.iter().all(|r| r.fusion.is_none()));
+    assert_eq!(single[0].sites, in_process(&frame(7, 1)).sites);
+
+    let both = stream_all(&channel, requests(true, Some(v1::FusionOptions::default()))).await;
+    assert_eq!(both.len(), 3, "every frame is answered");
+    for response in &both {
+        let Some(Outcome::Error(status)) = &response.outcome else {
+            panic!("{response:?}");
+        };
+        assert_eq!(status.code, tonic::Code::InvalidArgument as i32);
+        assert_eq!(bad_request_fields(status), vec!["fusion"]);
     }
     server.shutdown().await.unwrap();
 }
@@ -586,6 +638,7 @@ async fn recorded_frames_with_the_model_match_the_in_process_pipeline() {
             frame: Some(f.clone()),
             options: Some(options.clone()),
             overflow_policy: v1::OverflowPolicy::Block as i32,
+            single_frame: true,
             ..Default::default()
         })
         .collect();

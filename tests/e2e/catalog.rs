@@ -115,23 +115,25 @@ fn search_near(center: v1::GeodeticPoint, radius_m: f64) -> v1::SearchLandingSit
     }
 }
 
-/// Searches until the catalog returns something (the writer runs beside the stream), for at
-/// most ten seconds.
+/// Searches until the catalog returns something (the writer runs beside the stream, and opens
+/// the store in its own time: until then searches answer UNAVAILABLE), for at most ten seconds.
 async fn search_until_found(
     client: &mut LandingServiceClient<Channel>,
     request: v1::SearchLandingSitesRequest,
 ) -> v1::SearchLandingSitesResponse {
     let give_up = Instant::now() + Duration::from_secs(10);
     loop {
-        let page = client
-            .search_landing_sites(request.clone())
-            .await
-            .expect("search")
-            .into_inner();
-        if !page.sites.is_empty() || Instant::now() > give_up {
-            return page;
+        let found = match client.search_landing_sites(request.clone()).await {
+            Ok(page) => Some(page.into_inner()),
+            Err(status) if status.code() == tonic::Code::Unavailable => None,
+            Err(status) => panic!("search: {status:?}"),
+        };
+        match found {
+            Some(page) if !page.sites.is_empty() => return page,
+            Some(page) if Instant::now() > give_up => return page,
+            None if Instant::now() > give_up => panic!("the catalog never opened"),
+            _ => tokio::time::sleep(Duration::from_millis(50)).await,
         }
-        tokio::time::sleep(Duration::from_millis(50)).await;
     }
 }
 

@@ -216,6 +216,7 @@ async fn replay_writes_json_lines_and_mcap_equal_to_the_pipeline() {
         &server.url,
         "replay",
         s.path.to_str().expect("path"),
+        "--single-frame",
         "--segmentation",
         "point-classes",
         "--jsonl",

@@ -270,7 +270,7 @@ async fn a_stream_message_over_max_request_bytes_ends_the_stream_with_resource_e
     let (mut tx, mut rx) = client.open_stream(StreamConfig {
         options: Some(options.clone()),
         max_in_flight: 4,
-        ..Default::default()
+        ..StreamConfig::single_frame()
     });
     for frame in [frames[0].clone(), frames[1].clone(), big] {
         // The server may end the stream before the big frame is handed over.

@@ -26,7 +26,7 @@ async fn overload_is_resource_exhausted_with_retry_info_and_every_frame_answered
     let (mut tx, mut rx) = client.open_stream(StreamConfig {
         options: Some(mode(SegmentationMode::None)),
         max_in_flight: n,
-        ..Default::default()
+        ..StreamConfig::single_frame()
     });
     for f in frames {
         tx.send(f).await.expect("send");
@@ -65,7 +65,7 @@ async fn concurrent_streams_under_overload_get_exactly_one_answer_per_frame() {
         stream: StreamConfig {
             options: Some(mode(SegmentationMode::None)),
             max_in_flight: 3,
-            ..Default::default()
+            ..StreamConfig::single_frame()
         },
     };
     let report = run_load_test(&client, Arc::new(frames), &config, None)

@@ -34,7 +34,7 @@ where
     let (mut tx, mut rx) = client.open_stream(StreamConfig {
         options: Some(mode(SegmentationMode::None)),
         max_in_flight: 4,
-        ..Default::default()
+        ..StreamConfig::single_frame()
     });
     let sender = tokio::spawn(async move {
         for f in frames {

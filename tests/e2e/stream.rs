@@ -92,7 +92,7 @@ async fn latest_policy_answers_every_frame_exactly_once() {
         overflow_policy: OverflowPolicy::Latest,
         options: Some(mode(SegmentationMode::None)),
         max_in_flight: n,
-        fusion: None,
+        ..StreamConfig::single_frame()
     });
     for f in frames {
         tx.send(f).await.expect("send");
@@ -135,7 +135,7 @@ async fn the_client_window_bounds_frames_in_flight() {
     let (mut tx, mut rx) = client.open_stream(StreamConfig {
         options: Some(mode(SegmentationMode::None)),
         max_in_flight: 2,
-        ..Default::default()
+        ..StreamConfig::single_frame()
     });
     let sender = tokio::spawn(async move {
         let mut most = 0;

@@ -271,7 +271,7 @@ pub async fn stream_all(
     let config = StreamConfig {
         options: Some(options),
         max_in_flight: 4,
-        ..Default::default()
+        ..StreamConfig::single_frame()
     };
     stream_with(server, frames, config, None).await
 }

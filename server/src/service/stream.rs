@@ -96,7 +96,7 @@ impl StreamSession {
     }
 
     /// The frame converted, and its fusion turn when the stream fuses. The first message
-    /// decides whether the stream fuses, and with what map.
+    /// decides whether the stream fuses (unless it asks for `single_frame`), and with what map.
     fn convert(
         &mut self,
         request: &v1::StreamLandingSitesRequest,
@@ -106,12 +106,23 @@ impl StreamSession {
     ) {
         let dispatcher = &self.service.dispatcher;
         let defaults = &self.service.fusion;
-        let fusing = self.fusing.get_or_insert_with(|| match &request.fusion {
-            Some(asked) => match convert::fusion_map(asked, defaults) {
-                Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
-                Err(e) => Fusing::Refused(e),
-            },
-            None => Fusing::Off,
+        let fusing = self.fusing.get_or_insert_with(|| {
+            match (request.single_frame, request.fusion.as_ref()) {
+                (true, None) => Fusing::Off,
+                (true, Some(_)) => Fusing::Refused(crate::Error::invalid(
+                    "fusion",
+                    "fusion options on a stream that asks for single_frame would not be applied",
+                )),
+                (false, asked) => {
+                    match convert::fusion_map(
+                        asked.unwrap_or(&v1::FusionOptions::default()),
+                        defaults,
+                    ) {
+                        Ok(map) => Fusing::On(StreamFusion::open(map, &dispatcher.metrics)),
+                        Err(e) => Fusing::Refused(e),
+                    }
+                }
+            }
         });
         let parts = || convert::stream_parts(request, &dispatcher.pipeline.defaults);
         match fusing {
