@@ -375,7 +375,8 @@ def session(args, net, opt, rng, weights, state, config, data, val_data, out, va
     base_seconds, session_steps, session_seen = state["train_seconds"], 0, 0
     order = epoch_order(args.seed, state["epoch"], n)
     reason = "schedule done"
-    if state["step"] == 0 and val_data is not None:  # the starting point, for comparison
+    # The starting point, for comparison (once: not again after a resume at step 0).
+    if state["step"] == 0 and state["last_val_s"] is None and val_data is not None:
         save(args, net, opt, rng, state, config, data, val_data, out, val_log, log, force_val=True)
     while state["step"] < total:
         if stop["signal"] or time.time() - start >= args.minutes * 60 or session_steps == args.steps:
