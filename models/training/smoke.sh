@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # CI smoke test of the training code: a few training steps on the committed simulator frames
-# (perception/tests/data), ONNX export, and the parity check of ONNX Runtime against PyTorch.
-# Takes about a minute on 2 cores. Writes only under a temporary directory.
+# (perception/tests/data), an exact resume, ONNX export, and the parity check of ONNX Runtime
+# against PyTorch. Takes about two minutes on 2 cores. Writes only under a temporary directory.
 # PYTHON: an interpreter with models/training/requirements.txt; by default the venv .venvs/train,
 # made or refreshed here by scripts/python-env.sh (PyTorch: gigabytes the first time).
 set -euo pipefail
@@ -16,6 +16,23 @@ for arch in mobilenet_fcn8s shufflenet_unet; do
   "$python" "$root/models/training/export.py" "$tmp/$arch.pt" --out "$tmp/$arch.onnx" \
     --check-data "$data"
 done
+# Resuming is exact: 3 + 3 steps in two sessions give the weights of 6 in one (an FCN4s
+# warm-started from the shipped FCN8s), and the FCN4s exports with parity.
+resume=(--arch mobilenet_fcn4s --train "$data" --size 128x96 --batch 4 --total-steps 6 --threads 2
+        --init-onnx "$root/models/rooftop-segmentation.onnx")
+"$python" "$root/models/training/train.py" "${resume[@]}" --out "$tmp/once.pt"
+"$python" "$root/models/training/train.py" "${resume[@]}" --steps 3 --out "$tmp/twice.pt"
+"$python" "$root/models/training/train.py" "${resume[@]}" --resume --out "$tmp/twice.pt"
+"$python" - "$tmp/once.pt" "$tmp/twice.pt" <<'PY'
+import sys, torch
+a, b = (torch.load(p, map_location="cpu", weights_only=False) for p in sys.argv[1:3])
+assert a["training"]["steps"] == b["training"]["steps"] == 6, "steps"
+assert b["training"]["sessions"] == 2, "the second run did not resume"
+diff = max((a["state_dict"][k].float() - b["state_dict"][k].float()).abs().max().item() for k in a["state_dict"])
+assert diff == 0.0, f"resumed weights differ by {diff}"
+print("resume ok: 3 + 3 steps == 6 steps")
+PY
+"$python" "$root/models/training/export.py" "$tmp/once.pt" --out "$tmp/once.onnx" --check-data "$data"
 # The shipped model loads, has the documented signature, and is still small.
 "$python" - "$root/models/rooftop-segmentation.onnx" <<'PY'
 import sys, onnx
@@ -29,4 +46,4 @@ size_mb = len(m.SerializeToString()) / 2**20
 assert size_mb < 8, f"shipped model is {size_mb:.1f} MB"
 print(f"shipped model ok: {meta.get('name')} {meta.get('input_width')}x{meta.get('input_height')}, {size_mb:.2f} MB")
 PY
-echo "smoke: train + export + parity passed"
+echo "smoke: train + resume + export + parity passed"

@@ -72,21 +72,22 @@ def load_split(root: str | Path, limit: int | None = None, size: tuple[int, int]
     pairs = find_pairs(root)
     if limit:
         pairs = pairs[:limit]
-    images, labels = [], []
-    for img_path, lab_path in pairs:
-        img = Image.open(img_path).convert("RGB")
-        lab = Image.open(lab_path)
-        if lab.mode not in ("L", "P"):
-            lab = lab.convert("L")
-        if size is not None and img.size != size:
-            img = img.resize(size, Image.BILINEAR)
-        if size is not None and lab.size != size:
-            lab = lab.resize(size, Image.NEAREST)
-        if img.size != lab.size:
-            raise ValueError(f"{img_path} is {img.size} but {lab_path} is {lab.size}")
-        images.append(np.asarray(img, dtype=np.uint8))
-        labels.append(np.asarray(lab, dtype=np.uint8))
-    return np.stack(images), np.stack(labels)
+    read = [_read_pair(img, lab, size) for img, lab in pairs]
+    return np.stack([r[0] for r in read]), np.stack([r[1] for r in read])
+
+
+def _read_pair(img_path: Path, lab_path: Path, size: tuple[int, int] | None):
+    img = Image.open(img_path).convert("RGB")
+    lab = Image.open(lab_path)
+    if lab.mode not in ("L", "P"):
+        lab = lab.convert("L")
+    if size is not None and img.size != size:
+        img = img.resize(size, Image.BILINEAR)
+    if size is not None and lab.size != size:
+        lab = lab.resize(size, Image.NEAREST)
+    if img.size != lab.size:
+        raise ValueError(f"{img_path} is {img.size} but {lab_path} is {lab.size}")
+    return np.asarray(img, dtype=np.uint8), np.asarray(lab, dtype=np.uint8)
 
 
 _MEAN = torch.tensor(MEAN).view(1, 3, 1, 1)
@@ -104,3 +105,27 @@ def to_target(labels_u8: np.ndarray | torch.Tensor) -> torch.Tensor:
     y = torch.as_tensor(labels_u8).long() - 1
     y[y < 0] = 255
     return y
+
+
+class LazySplit:
+    """A dataset read on demand, a batch at a time, so that tens of thousands of images need
+    neither the memory to hold them nor minutes to load before the first step. Same pairs, order
+    and resizing as `load_split`."""
+
+    def __init__(self, root: str | Path, limit: int | None = None,
+                 size: tuple[int, int] | None = None):
+        self.root = Path(root)
+        self.pairs = find_pairs(root)
+        if limit:
+            self.pairs = self.pairs[:limit]
+        self.size = size
+        first, _ = self.batch([0])
+        self.height, self.width = first.shape[1:3]
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def batch(self, indices) -> tuple[np.ndarray, np.ndarray]:
+        """(images uint8 [B, H, W, 3], labels uint8 [B, H, W]) of the given indices."""
+        pairs = [_read_pair(*self.pairs[int(i)], self.size) for i in indices]
+        return np.stack([p[0] for p in pairs]), np.stack([p[1] for p in pairs])

@@ -2,7 +2,8 @@
 
 The exporter folds every BatchNorm into the convolution before it, so an exported graph holds one
 weight and one bias per convolution, in the order the network runs them. Reloading maps the ONNX
-`Conv` nodes, in graph order, onto the network's `Conv2d` modules in forward order, and turns each
+`Conv` nodes, in graph order, onto the network's `Conv2d` modules in forward order (skipping those marked `warm_start_skip`, which
+a larger head adds and zero-initialises), and turns each
 folded bias back into a BatchNorm that reproduces it:
 
     BN(x) = (x - m) / sqrt(v + eps) * g + b,  with m = mu, v = sigma^2 - eps, g = sigma, b = mu + bias
@@ -64,7 +65,9 @@ def load_onnx_weights(net: nn.Module, path: str, calibration: torch.Tensor) -> N
     """Loads the folded weights of `path` into `net` (same architecture and width), calibrating
     the recreated BatchNorms on `calibration` (normalised NCHW images)."""
     convs = _onnx_convs(path)
-    order = _forward_order(net, calibration[:1])
+    # Convolutions new to `net` (e.g. FCN4s's /4 scores) keep their own initialisation.
+    order = [c for c in _forward_order(net, calibration[:1])
+             if not getattr(c, "warm_start_skip", False)]
     if len(order) != len(convs):
         raise ValueError(f"{path} has {len(convs)} convolutions, the network {len(order)}")
     bns = _bn_after(net)
