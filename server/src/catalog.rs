@@ -329,8 +329,8 @@ impl Writer {
         );
         match store.apply(&batch) {
             Ok(report) => {
-                s.metrics.catalog_written(&report);
                 s.metrics.catalog_connected(true);
+                s.metrics.catalog_written(&report);
                 let counts = store.counts();
                 if let Ok(counts) = &counts {
                     s.metrics.catalog_sites(counts);
