@@ -221,76 +221,77 @@ async fn fly(
     channel: Channel,
     frames: Arc<Vec<v1::Frame>>,
     stream: usize,
-    mut stop: watch::Receiver<bool>,
+    stop: watch::Receiver<bool>,
 ) -> StreamReport {
     let mut report = StreamReport::default();
+    if let Err(e) = fly_until(channel, &frames, stream, stop, &mut report).await {
+        report.error = Some(e);
+    }
+    report
+}
+
+async fn fly_until(
+    channel: Channel,
+    frames: &[v1::Frame],
+    stream: usize,
+    mut stop: watch::Receiver<bool>,
+    report: &mut StreamReport,
+) -> Result<(), String> {
     let (tx, rx) = mpsc::channel(1);
     let mut client = LandingServiceClient::new(channel);
-    let call = client.stream_landing_sites(tokio_stream::wrappers::ReceiverStream::new(rx));
-    let mut answers: Option<tonic::Streaming<v1::StreamLandingSitesResponse>> = None;
-    let mut call = Some(Box::pin(call));
+    let mut call = Some(Box::pin(
+        client.stream_landing_sites(tokio_stream::wrappers::ReceiverStream::new(rx)),
+    ));
+    let mut answers = None;
     for (i, frame) in frames.iter().cycle().enumerate() {
         if *stop.borrow_and_update() {
             break;
         }
-        let request = v1::StreamLandingSitesRequest {
-            frame: Some(v1::Frame {
-                drone_id: format!("faults-{stream}"),
-                sequence: i as u64,
-                geodetic_origin: Some(origin(stream)),
-                ..frame.clone()
-            }),
-            options: Some(v1::PipelineOptions {
-                segmentation_mode: v1::SegmentationMode::ClassImage as i32,
-                ..Default::default()
-            }),
-            overflow_policy: v1::OverflowPolicy::Block as i32,
-            fusion: (i == 0).then(v1::FusionOptions::default),
-            reset_fusion: false,
-        };
         let sent_at = Instant::now();
-        if tx.send(request).await.is_err() {
-            report.error = Some("the request stream closed".into());
-            break;
-        }
+        tx.send(request(frame, i, stream))
+            .await
+            .map_err(|_| "the request stream closed")?;
         report.sent += 1;
+        // The call answers once the server has the stream's first message.
         if let Some(c) = call.take() {
-            match c.await {
-                Ok(r) => answers = Some(r.into_inner()),
-                Err(status) => {
-                    report.error = Some(format!("{status:?}"));
-                    break;
-                }
-            }
+            answers = Some(c.await.map_err(|s| format!("{s:?}"))?.into_inner());
         }
-        let next = answers.as_mut().unwrap().message();
-        match tokio::time::timeout(Duration::from_secs(30), next).await {
-            Ok(Ok(Some(answer))) => {
-                if !matches!(
-                    answer.outcome,
-                    Some(v1::stream_landing_sites_response::Outcome::Result(_))
-                ) {
-                    report.error = Some(format!("frame {i}: {:?}", answer.outcome));
-                    break;
-                }
-                report.answered += 1;
-                report.latencies.push((sent_at, sent_at.elapsed()));
-            }
-            Ok(Ok(None)) => {
-                report.error = Some("the stream ended early".into());
-                break;
-            }
-            Ok(Err(status)) => {
-                report.error = Some(format!("{status:?}"));
-                break;
-            }
-            Err(_) => {
-                report.error = Some(format!("frame {i} unanswered after 30 s"));
-                break;
-            }
+        let next = answers.as_mut().expect("the call answered").message();
+        let answer = tokio::time::timeout(Duration::from_secs(30), next)
+            .await
+            .map_err(|_| format!("frame {i} unanswered after 30 s"))?
+            .map_err(|s| format!("{s:?}"))?
+            .ok_or("the stream ended early")?;
+        if !matches!(
+            answer.outcome,
+            Some(v1::stream_landing_sites_response::Outcome::Result(_))
+        ) {
+            return Err(format!("frame {i}: {:?}", answer.outcome));
         }
+        report.answered += 1;
+        report.latencies.push((sent_at, sent_at.elapsed()));
     }
-    report
+    Ok(())
+}
+
+/// The `i`th message of stream `stream`: the frame as drone `faults-{stream}` saw it over its
+/// origin, classed by its label image; the first message asks for fusion.
+fn request(frame: &v1::Frame, i: usize, stream: usize) -> v1::StreamLandingSitesRequest {
+    v1::StreamLandingSitesRequest {
+        frame: Some(v1::Frame {
+            drone_id: format!("faults-{stream}"),
+            sequence: i as u64,
+            geodetic_origin: Some(origin(stream)),
+            ..frame.clone()
+        }),
+        options: Some(v1::PipelineOptions {
+            segmentation_mode: v1::SegmentationMode::ClassImage as i32,
+            ..Default::default()
+        }),
+        overflow_policy: v1::OverflowPolicy::Block as i32,
+        fusion: (i == 0).then(v1::FusionOptions::default),
+        reset_fusion: false,
+    }
 }
 
 /// Starts [`STREAMS`] streams; `stop` ends them.
@@ -514,14 +515,13 @@ fn check_file(path: &Path, logged: &[(Batch, f64)], round: usize) -> landing_cat
     );
     let when = match in_flight {
         None => "between batches".to_owned(),
+        Some((n, seen, queued)) if in_flight_committed => format!(
+            "after a batch of {n} observations ({seen} seen areas; {queued} queued behind it) \
+             committed, before the server logged it"
+        ),
         Some((n, seen, queued)) => format!(
             "during a batch of {n} observations ({seen} seen areas; {queued} queued behind it), \
-             which {}",
-            if in_flight_committed {
-                "had committed"
-            } else {
-                "is not in the file"
-            }
+             which is not in the file"
         ),
     };
     eprintln!(
@@ -705,51 +705,21 @@ async fn postgres_fault(
     let mut server = ServerProcess::start(&env).await;
     let mut client = LandingServiceClient::new(server.channel().await);
     let (stop, streams) = fleet(&server, &frames).await;
-    let writes = "landing_catalog_writes_total";
-    until_metric(&server, writes, Duration::from_secs(30), |n| n >= 8.0).await;
+    until_metric(&server, WRITES, Duration::from_secs(30), |n| n >= 8.0).await;
 
     let pg = db.clone();
     tokio::task::spawn_blocking(move || pg.stop_immediately())
         .await
         .unwrap();
     let down_at = Instant::now();
-    let written_at_stop = server.metric(writes).await;
-    let mut unavailable = 0;
-    while down_at.elapsed() < DOWN {
-        let asked = Instant::now();
-        let status = client
-            .search_landing_sites(search_near(origin(0)))
-            .await
-            .expect_err("no search while the database is down");
-        assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
-        assert!(status.message().contains("catalog"), "{status:?}");
-        assert!(
-            asked.elapsed() < ON_TIME,
-            "a search took {:?}",
-            asked.elapsed()
-        );
-        unavailable += 1;
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    let failures = server.metric("landing_catalog_write_failures_total").await;
-    assert!(
-        failures > 0.0,
-        "the writes while down failed and were counted"
-    );
-    assert_eq!(server.metric("landing_catalog_connected").await, 0.0);
-    let written_while_down = server.metric(writes).await;
-    assert_eq!(
-        written_at_stop, written_while_down,
-        "nothing is written while down"
-    );
-
+    let down = while_down(&server, &mut client).await;
     let pg = db.clone();
     tokio::task::spawn_blocking(move || pg.start_again())
         .await
         .unwrap();
     let up_at = Instant::now();
-    let resumed = until_metric(&server, writes, Duration::from_secs(15), |n| {
-        n > written_while_down
+    let resumed = until_metric(&server, WRITES, Duration::from_secs(15), |n| {
+        n > down.written
     })
     .await;
     let resumed_in = up_at.elapsed();
@@ -767,9 +737,95 @@ async fn postgres_fault(
     let dropped = server.metric("landing_catalog_dropped_total").await;
 
     stop.send_replace(true);
-    let mut before = Vec::new();
-    let mut during = Vec::new();
-    let (mut sent, mut answered) = (0, 0);
+    let (sent, before, during) = latencies(streams, down_at, up_at).await;
+    let mut logged = Vec::new();
+    while let Ok(line) = server.log.try_recv() {
+        if let Some(b) = batch(&line) {
+            logged.push((b, log_seconds(&line)));
+        }
+    }
+    let batches = batch_seconds(&logged);
+    let ms = |d: &Duration| d.as_secs_f64() * 1e3;
+    eprintln!(
+        "{sent} frames sent and answered; latency before the stop p50 {:.0} ms max {:.0} ms ({} \
+         frames), while down p50 {:.0} ms max {:.0} ms ({} frames); {} searches UNAVAILABLE \
+         while down; {} write failures; writes resumed {:.2} s after the restart ({} → {resumed} \
+         observations written); {} batches written, each in p50 {:.0} ms, max {:.0} ms; \
+         {dropped} observations dropped (queue full or down)",
+        ms(&before[before.len() / 2]),
+        ms(before.last().unwrap()),
+        before.len(),
+        ms(&during[during.len() / 2]),
+        ms(during.last().unwrap()),
+        during.len(),
+        down.searches,
+        down.failures,
+        resumed_in.as_secs_f64(),
+        down.written,
+        batches.len(),
+        batches[batches.len() / 2] * 1e3,
+        batches.last().unwrap() * 1e3,
+    );
+}
+
+const WRITES: &str = "landing_catalog_writes_total";
+
+/// What the test saw while the database was down.
+struct Down {
+    /// Searches answered UNAVAILABLE.
+    searches: u32,
+    /// Write failures counted.
+    failures: f64,
+    /// Observations written (the same all along).
+    written: f64,
+}
+
+/// For [`DOWN`] after the database stopped: every search answers UNAVAILABLE naming the
+/// catalog, within [`ON_TIME`]; then the writes that failed are counted, nothing was written,
+/// and the catalog says it is not connected.
+async fn while_down(server: &ServerProcess, client: &mut LandingServiceClient<Channel>) -> Down {
+    let down_at = Instant::now();
+    let written = server.metric(WRITES).await;
+    let mut searches = 0;
+    while down_at.elapsed() < DOWN {
+        let asked = Instant::now();
+        let status = client
+            .search_landing_sites(search_near(origin(0)))
+            .await
+            .expect_err("no search while the database is down");
+        assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+        assert!(status.message().contains("catalog"), "{status:?}");
+        let took = asked.elapsed();
+        assert!(took < ON_TIME, "a search took {took:?}");
+        searches += 1;
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let failures = server.metric("landing_catalog_write_failures_total").await;
+    assert!(
+        failures > 0.0,
+        "the writes while down failed and were counted"
+    );
+    assert_eq!(server.metric("landing_catalog_connected").await, 0.0);
+    assert_eq!(
+        written,
+        server.metric(WRITES).await,
+        "nothing is written while down"
+    );
+    Down {
+        searches,
+        failures,
+        written,
+    }
+}
+
+/// Every stream's frames answered, each within [`ON_TIME`]: how many, and the latencies of the
+/// frames sent before `down_at` and between it and `up_at`, sorted.
+async fn latencies(
+    streams: Vec<tokio::task::JoinHandle<StreamReport>>,
+    down_at: Instant,
+    up_at: Instant,
+) -> (u64, Vec<Duration>, Vec<Duration>) {
+    let (mut sent, mut before, mut during) = (0, Vec::new(), Vec::new());
     for s in streams {
         let report = s.await.unwrap();
         assert_eq!(report.error, None, "{report:?}");
@@ -777,7 +833,7 @@ async fn postgres_fault(
             report.sent, report.answered,
             "every frame answered: {report:?}"
         );
-        (sent, answered) = (sent + report.sent, answered + report.answered);
+        sent += report.sent;
         for (at, took) in report.latencies {
             assert!(took < ON_TIME, "a frame took {took:?}");
             if at < down_at {
@@ -788,34 +844,10 @@ async fn postgres_fault(
         }
     }
     assert!(
-        !during.is_empty(),
-        "frames were sent while the database was down"
+        !before.is_empty() && !during.is_empty(),
+        "frames before and while down"
     );
     before.sort();
     during.sort();
-    let mut logged = Vec::new();
-    while let Ok(line) = server.log.try_recv() {
-        if let Some(b) = batch(&line) {
-            logged.push((b, log_seconds(&line)));
-        }
-    }
-    let batches = batch_seconds(&logged);
-    let ms = |d: &Duration| d.as_secs_f64() * 1e3;
-    eprintln!(
-        "{sent} frames sent, {answered} answered; latency before the stop p50 {:.0} ms max {:.0} \
-         ms ({} frames), while down p50 {:.0} ms max {:.0} ms ({} frames); {unavailable} searches \
-         UNAVAILABLE while down; {failures} write failures; writes resumed {:.2} s after the \
-         restart ({written_while_down} → {resumed} observations written); {} batches written, each \
-         in p50 {:.0} ms, max {:.0} ms; {dropped} observations dropped (queue full or down)",
-        ms(&before[before.len() / 2]),
-        ms(before.last().unwrap()),
-        before.len(),
-        ms(&during[during.len() / 2]),
-        ms(during.last().unwrap()),
-        during.len(),
-        resumed_in.as_secs_f64(),
-        batches.len(),
-        batches[batches.len() / 2] * 1e3,
-        batches.last().unwrap() * 1e3,
-    );
+    (sent, before, during)
 }
