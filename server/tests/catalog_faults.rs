@@ -275,7 +275,8 @@ async fn fly_until(
 }
 
 /// The `i`th message of stream `stream`: the frame as drone `faults-{stream}` saw it over its
-/// origin, classed by its label image; the first message asks for fusion.
+/// origin, classed by its label image; the first message asks for fusion with the server's
+/// defaults.
 fn request(frame: &v1::Frame, i: usize, stream: usize) -> v1::StreamLandingSitesRequest {
     v1::StreamLandingSitesRequest {
         frame: Some(v1::Frame {
@@ -290,7 +291,7 @@ fn request(frame: &v1::Frame, i: usize, stream: usize) -> v1::StreamLandingSites
         }),
         overflow_policy: v1::OverflowPolicy::Block as i32,
         fusion: (i == 0).then(v1::FusionOptions::default),
-        reset_fusion: false,
+        ..Default::default()
     }
 }
 
