@@ -1,5 +1,6 @@
 //! Faults at the store level: a SQLite writer killed mid-write, a PostgreSQL server stopped and
-//! restarted mid-load. (The server-level ones, frames answered throughout, come with the wiring.)
+//! restarted mid-load. The server-level ones, with the real binary and frames answered
+//! throughout, are in `server/tests/catalog_faults.rs`.
 
 #[path = "support/postgres.rs"]
 #[allow(dead_code)]

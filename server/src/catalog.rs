@@ -289,6 +289,9 @@ impl Writer {
             let mut until = deadline.min(self.next_expire);
             if self.store.is_none() {
                 until = until.min(self.next_open);
+            } else if self.next_write > now && !q.observations.is_empty() {
+                // A failed write is retried when its interval is up, not at the next flush.
+                until = until.min(self.next_write);
             }
             if now >= until {
                 break;
@@ -310,22 +313,40 @@ impl Writer {
     }
 
     /// Applies a batch; on a storage failure puts it back (oldest first, within the capacity)
-    /// and waits `retry_interval_s` before the next write, unless stopping.
+    /// and waits `retry_interval_s` before the next write, unless stopping. Each batch is logged
+    /// at debug level before and after (with the store's counts): what a killed server had
+    /// committed can be read back from its log.
     fn write(&mut self, batch: Vec<Observation>, stopping: bool) {
         let s = self.shared.clone();
         let Some(store) = &self.store else {
             return self.requeue(batch);
         };
+        tracing::debug!(
+            observations = batch.len(),
+            seen_areas = batch.iter().map(|o| o.seen.len()).sum::<usize>(),
+            queued = lock(&s.queue).observations.len(),
+            "writing a catalog batch"
+        );
         match store.apply(&batch) {
             Ok(report) => {
+                s.metrics.catalog_connected(true);
                 s.metrics.catalog_written(&report);
-                if let Ok(counts) = store.counts() {
-                    s.metrics.catalog_sites(&counts);
+                let counts = store.counts();
+                if let Ok(counts) = &counts {
+                    s.metrics.catalog_sites(counts);
                 }
+                let counts = counts.ok();
+                tracing::debug!(
+                    observations = report.observations,
+                    sites = counts.map(|c| c.confirmed),
+                    seen_areas = counts.map(|c| c.seen_areas),
+                    "catalog batch written"
+                );
             }
             Err(e @ landing_catalog::Error::Storage { .. }) if !stopping => {
                 tracing::warn!(error = %e, observations = batch.len(), "catalog write failed; retrying");
                 s.metrics.catalog_write_failed();
+                s.metrics.catalog_connected(false);
                 self.next_write =
                     Instant::now() + Duration::from_secs_f64(s.config.retry_interval_s);
                 self.requeue(batch);
