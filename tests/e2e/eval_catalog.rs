@@ -95,7 +95,11 @@ async fn eval_catalog_scores_every_visit_and_refuses_a_used_catalog() {
         keys.len()
     };
     let all = &v["overall"];
-    assert_eq!(count(&all["unsafe_sites"]), distinct(Some("unsafe")), "{v:#}");
+    assert_eq!(
+        count(&all["unsafe_sites"]),
+        distinct(Some("unsafe")),
+        "{v:#}"
+    );
     assert_eq!(count(&all["sites"]), distinct(None), "{v:#}");
     let stale = v["stale"].as_array().expect("stale");
     assert_eq!(count(&all["stale"]), stale.len(), "{v:#}");
