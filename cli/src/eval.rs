@@ -80,16 +80,17 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u32).range(1..=64))]
     pub window: u32,
     /// Score the fleet's catalog over a revisit set (`landing-sim scenarios --revisits N`):
-    /// stream every visit's approach fused, in time order, and after each search the catalog
-    /// around the visit's target roofs; judge each site against the world at that visit
-    /// (unsafe though confirmed by this visit: must be 0; stale: unsafe, confirmed before; recall
-    /// of landable target roofs). The server's catalog must be FRESH (a new
+    /// stream every approach fused, in time order, and after each search the catalog around
+    /// every target roof of every world; judge each site against the world as it is then
+    /// (unsafe now and when last confirmed: must be 0; stale: unsafe now, safe when last
+    /// confirmed, followed until withdrawn or confirmed again; recall of the landable roofs the
+    /// approach re-scanned). The server's catalog must be FRESH (a new
     /// LANDING__CATALOG__PATH): the run refuses one that already holds sites around the set's
     /// roofs. Streams in model mode (truth when --modes names truth and not model); writes
     /// catalog.md and catalog.json; exit 7 when a gated mode returned an unsafe, not stale, site.
     #[arg(long)]
     pub catalog: bool,
-    /// With `--catalog`: how long to wait after each visit for the catalog to show its
+    /// With `--catalog`: how long to wait after each approach for the catalog to show its
     /// confirmations, seconds: at most this, and a third of it without change once one shows
     /// (keep it at least 3 × the server's `catalog.flush_interval_s`, 1 s by default).
     #[arg(long, default_value_t = 4.0, value_parser = parse_tolerance)]
@@ -224,7 +225,7 @@ pub async fn eval_cmd(
     })
 }
 
-/// `landing eval --catalog`: streams the revisit set and scores the catalog after each visit
+/// `landing eval --catalog`: streams the revisit set and scores the catalog after each approach
 /// ([`landing_eval::catalog`]); prints the table (or JSON) and writes catalog.md and catalog.json.
 async fn catalog_cmd(
     connection: &ConnectionArgs,
@@ -256,7 +257,7 @@ async fn catalog_cmd(
     let scenarios = scenarios(args)?;
     let client = LandingClient::connect(client_config(connection)?).await?;
     let report = run_catalog(&client, &scenarios, &config, |done, total| {
-        eprintln!("landing eval --catalog: {done}/{total} visits");
+        eprintln!("landing eval --catalog: {done}/{total} approaches");
     })
     .await?;
     write_catalog_report(&args.out, &report)?;

@@ -1,7 +1,8 @@
 //! `landing eval --catalog` against a real server with a catalog in a fresh SQLite file, over a
-//! tiny revisit set written by the simulator: a table per visit whose counts agree with the
-//! sites it lists (unsafe: confirmed by this visit; stale: confirmed before), recall in [0, 1],
-//! the report files written; a second run on the same catalog is refused as not fresh.
+//! tiny revisit set written by the simulator: one check per approach, a table per visit whose
+//! counts agree with the sites the checks list (unsafe and distinct sites) and the stale sites
+//! followed, recall in [0, 1], the report files written; a second run on the same catalog is
+//! refused as not fresh.
 
 use landing_cli::exit;
 use landing_server::Config;
@@ -77,20 +78,36 @@ async fn eval_catalog_scores_every_visit_and_refuses_a_used_catalog() {
     ];
     let (code, stdout) = landing(&args).await;
     let v: Value = serde_json::from_str(&stdout).expect("json");
-    let sites = v["sites"].as_array().expect("sites");
-    let unsafe_confirmed = sites
+    let checks = v["checks"].as_array().expect("checks");
+    assert_eq!(checks.len(), 2, "one check after each approach: {v:#}");
+    let scores: Vec<&Value> = checks
         .iter()
-        .filter(|s| s["unsafe_now"] == true && s["confirmed_this_visit"] == true)
-        .count();
-    let stale = sites
-        .iter()
-        .filter(|s| s["unsafe_now"] == true && s["confirmed_this_visit"] == false)
-        .count();
+        .flat_map(|c| c["sites"].as_array().expect("sites"))
+        .collect();
+    let distinct = |class: Option<&str>| {
+        let mut keys: Vec<String> = scores
+            .iter()
+            .filter(|s| class.is_none_or(|c| s["class"] == c))
+            .map(|s| format!("{}/{}/{}", s["world"], s["site_id"], s["first_seen_ms"]))
+            .collect();
+        keys.sort();
+        keys.dedup();
+        keys.len()
+    };
     let all = &v["overall"];
-    assert_eq!(count(&all["unsafe_sites"]), unsafe_confirmed, "{v:#}");
-    assert_eq!(count(&all["stale"]), stale, "{v:#}");
-    assert_eq!(count(&all["sites"]), sites.len(), "{v:#}");
-    let want = if unsafe_confirmed > 0 { 7 } else { exit::OK };
+    assert_eq!(
+        count(&all["unsafe_sites"]),
+        distinct(Some("unsafe")),
+        "{v:#}"
+    );
+    assert_eq!(count(&all["sites"]), distinct(None), "{v:#}");
+    let stale = v["stale"].as_array().expect("stale");
+    assert_eq!(count(&all["stale"]), stale.len(), "{v:#}");
+    let want = if count(&all["unsafe_sites"]) > 0 {
+        7
+    } else {
+        exit::OK
+    };
     assert_eq!(code, want, "{v:#}");
     let per_visit = v["per_visit"].as_array().expect("per_visit");
     assert_eq!(per_visit.len(), 2, "visits 0 and 1: {v:#}");
@@ -107,7 +124,7 @@ async fn eval_catalog_scores_every_visit_and_refuses_a_used_catalog() {
     // The first visit cannot be stale: nothing was confirmed before it.
     assert_eq!(count(&per_visit[0]["stale"]), 0, "{v:#}");
     assert!(out.join("catalog.md").is_file() && out.join("catalog.json").is_file());
-    if !sites.is_empty() {
+    if !scores.is_empty() {
         let (again, _) = landing(&args).await;
         assert_eq!(again, exit::ERROR, "a used catalog is refused");
     }

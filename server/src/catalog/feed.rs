@@ -13,8 +13,11 @@
 //! - a site only when every map point within its safe circle is landable ground that a camera
 //!   resolved (`fusion.max_pixel_footprint_m`; a stream that turns the rule off is not
 //!   catalogued), and only once `catalog.min_frames` consecutive answers of the stream found it
-//!   so (the same roof: overlapping circles within half a metre in height); its `frames` is that
-//!   count;
+//!   so: each answer's site on resolved ground finds again the region of one of the answer
+//!   before (overlapping circles within half a metre in height, or the earlier safest point
+//!   inside the later landable polygon on that plane: an answer may pick another of a region's
+//!   near-equal widest circles, metres away, and pick the first again later); its `frames` is
+//!   that count;
 //! - nothing from a stream before `catalog.min_frames` answers: a look that short neither adds nor
 //!   withdraws.
 //!
@@ -123,29 +126,7 @@ impl Feed {
             self.tracked.clear();
         }
         self.answers = self.answers.saturating_add(1);
-        let sites: Vec<(Site, Streak)> = out
-            .sites
-            .iter()
-            .zip(&evidence.resolved)
-            .map(|(site, &resolved)| {
-                let before = self
-                    .tracked
-                    .iter()
-                    .filter(|(t, _)| resolved && same_roof(t, site))
-                    .map(|(_, streak)| *streak)
-                    .max_by_key(|streak| streak.run)
-                    .unwrap_or_default();
-                let streak = if resolved {
-                    Streak {
-                        run: before.run + 1,
-                        unreported: before.unreported + 1,
-                    }
-                } else {
-                    Streak::default()
-                };
-                (site.clone(), streak)
-            })
-            .collect();
+        let sites = streaks(&self.tracked, &out.sites, &evidence.resolved);
         self.tracked = sites.iter().filter(|(_, s)| s.run > 0).cloned().collect();
         self.latest = Some(Latest {
             at: Timestamp::now(),
@@ -198,12 +179,50 @@ impl Drop for Feed {
     }
 }
 
-/// Whether two answers' sites are the same roof (the catalog's rule: overlapping safe circles,
-/// plane heights within [`SAME_ROOF_HEIGHT_M`]).
-fn same_roof(a: &Site, b: &Site) -> bool {
-    let d = (a.center[0] - b.center[0]).hypot(a.center[1] - b.center[1]);
-    d < a.safe_radius_m + b.safe_radius_m
-        && (a.plane_height_m - b.plane_height_m).abs() <= SAME_ROOF_HEIGHT_M
+/// The streaks of an answer's `sites` (`resolved`: per site, whether it lies on resolved ground)
+/// given the previous answer's `tracked` sites: a site on resolved ground continues the longest
+/// streak of a tracked site it [`continues`]; any other starts at 0.
+fn streaks(tracked: &[(Site, Streak)], sites: &[Site], resolved: &[bool]) -> Vec<(Site, Streak)> {
+    sites
+        .iter()
+        .zip(resolved)
+        .map(|(site, &resolved)| {
+            if !resolved {
+                return (site.clone(), Streak::default());
+            }
+            let before = tracked
+                .iter()
+                .filter(|(t, _)| continues(t, site))
+                .map(|(_, streak)| *streak)
+                .max_by_key(|streak| streak.run)
+                .unwrap_or_default();
+            let streak = Streak {
+                run: before.run + 1,
+                unreported: before.unreported + 1,
+            };
+            (site.clone(), streak)
+        })
+        .collect()
+}
+
+/// Whether `new` finds again the landable region where the previous answer found `old`: the
+/// same roof (the catalog's rule: overlapping safe circles, plane heights within
+/// [`SAME_ROOF_HEIGHT_M`]), or, on the same plane, `old`'s safest point inside `new`'s landable
+/// polygon. The second holds when an answer picks another of a region's near-equal widest circles:
+/// polylabel's pick can jump between two maxima metres apart from one answer to the next and
+/// back, and the region was found all along.
+fn continues(old: &Site, new: &Site) -> bool {
+    if (old.plane_height_m - new.plane_height_m).abs() > SAME_ROOF_HEIGHT_M {
+        return false;
+    }
+    let d = (old.center[0] - new.center[0]).hypot(old.center[1] - new.center[1]);
+    let flat = |ring: &[[f64; 3]]| ring.iter().map(|p| [p[0], p[1]]).collect::<Vec<_>>();
+    let region = landing_geometry::Polygon {
+        shell: flat(&new.shell),
+        holes: new.holes.iter().map(|h| flat(h)).collect(),
+    };
+    d < old.safe_radius_m + new.safe_radius_m
+        || (region.shell.len() >= 3 && region.signed_distance([old.center[0], old.center[1]]) > 0.0)
 }
 
 /// The observation of `latest`: its sites found by at least `min_frames` consecutive answers
@@ -303,3 +322,73 @@ fn truncated(id: &str) -> String {
 /// The longest id the catalog keeps, in bytes (the catalog's own limit, which it does not
 /// export; a longer one would make it refuse the whole batch).
 const MAX_ID_BYTES: usize = 256;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A site on the plane at `height` whose landable polygon is the rectangle `[x0, y0, x1, y1]`,
+    /// with its safe circle at `center`.
+    fn site(rect: [f64; 4], center: [f64; 2], radius: f64, height: f64) -> Site {
+        let [x0, y0, x1, y1] = rect;
+        Site {
+            rank: 1,
+            shell: vec![
+                [x0, y0, height],
+                [x1, y0, height],
+                [x1, y1, height],
+                [x0, y1, height],
+            ],
+            holes: vec![],
+            plane_height_m: height,
+            center: [center[0], center[1], height],
+            center_geodetic: None,
+            safe_radius_m: radius,
+            area_m2: (x1 - x0) * (y1 - y0),
+            normal: [0.0, 0.0, 1.0],
+            point_count: 0,
+            triangle_count: 0,
+        }
+    }
+
+    /// The runs of `answers` (each one site on resolved ground) fed in order.
+    fn runs(answers: &[Site]) -> Vec<u32> {
+        let mut tracked: Vec<(Site, Streak)> = Vec::new();
+        let mut out = Vec::new();
+        for a in answers {
+            tracked = streaks(&tracked, std::slice::from_ref(a), &[true]);
+            out.push(tracked[0].1.run);
+        }
+        out
+    }
+
+    /// Seed 6101, building 63 of world 6102 at visit 2: a 4 x 12 m roof whose widest circles lie
+    /// at both ends; the fused answers picked one end for 27 answers, the other for 4, then the
+    /// first again in the last answer, and the catalog got nothing from the approach (the last
+    /// answer's site had a run of 1).
+    #[test]
+    fn a_streak_survives_the_answer_picking_another_widest_circle_of_the_region() {
+        let roof = [163.0, 245.0, 167.0, 255.0];
+        let north = site(roof, [165.0, 252.7], 1.8, 28.0);
+        let south = site(roof, [165.2, 246.8], 1.9, 28.0);
+        let answers = [north.clone(), north.clone(), south.clone(), south, north];
+        assert_eq!(runs(&answers), [1, 2, 3, 4, 5]);
+    }
+
+    #[test]
+    fn a_streak_restarts_on_another_region_or_plane_and_off_resolved_ground() {
+        let roof = site([0.0, 0.0, 4.0, 12.0], [2.0, 2.0], 1.8, 28.0);
+        // A separate roof beside it: the earlier point is outside its polygon.
+        let beside = site([6.0, 0.0, 10.0, 12.0], [8.0, 9.0], 1.8, 28.0);
+        assert_eq!(runs(&[roof.clone(), roof.clone(), beside]), [1, 2, 1]);
+        // The same outline a storey higher (a rooftop structure's top): another plane.
+        let above = site([0.0, 0.0, 4.0, 12.0], [2.0, 9.0], 1.8, 31.0);
+        assert_eq!(runs(&[roof.clone(), roof.clone(), above]), [1, 2, 1]);
+        // Not on resolved ground: no streak, and the next answer starts again.
+        let tracked = streaks(&[], std::slice::from_ref(&roof), &[true]);
+        let off = streaks(&tracked, std::slice::from_ref(&roof), &[false]);
+        assert_eq!(off[0].1.run, 0);
+        let again = streaks(&off[..0], std::slice::from_ref(&roof), &[true]);
+        assert_eq!(again[0].1.run, 1);
+    }
+}
