@@ -1103,7 +1103,7 @@ mod specific {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("catalog.sqlite");
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 2);
+        assert_eq!(store.schema_version().unwrap(), 3);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
@@ -1165,7 +1165,7 @@ mod specific {
         .unwrap();
         drop(raw);
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 2);
+        assert_eq!(store.schema_version().unwrap(), 3);
         store.check_integrity().unwrap();
         let page = store
             .search(&SearchQuery::new(ORIGIN, 100.0), t(20))
@@ -1194,7 +1194,7 @@ mod specific {
         let server = pg::shared();
         let url = server.create_database();
         let store = PostgisStore::connect(&url).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 1);
+        assert_eq!(store.schema_version().unwrap(), 2);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
