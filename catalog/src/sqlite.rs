@@ -39,7 +39,7 @@
 use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 use std::path::Path;
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{LazyLock, Mutex, MutexGuard};
 use std::time::Duration;
 
 use rusqlite::{
@@ -169,8 +169,8 @@ impl SqliteStore {
              PRAGMA cache_size = -{CACHE_KIB};"
         ))
         .map_err(db)?;
-        // A keyed search holds one cursor per cell at once, all of one statement.
-        conn.set_prepared_statement_cache_capacity(MAX_CELLS + 16);
+        // A keyed search holds one cursor per cell at once, each its own cached statement.
+        conn.set_prepared_statement_cache_capacity(2 * MAX_CELLS + 16);
         migrate(&mut conn)?;
         Ok(SqliteStore {
             conn: Mutex::new(conn),
@@ -577,16 +577,27 @@ fn group_page(
 
 /// Largest safe radius first: one cell's records in the order's index, from the cursor's key
 /// on (`?3`), with the search's filters (`?4` minimum radius, `?5` age cut-off).
-const BY_RADIUS_SQL: &str = "SELECT id, latitude_deg, longitude_deg, safe_radius_m, \
+const BY_RADIUS_SQL: &str = "SELECT /* cursor */ id, latitude_deg, longitude_deg, safe_radius_m, \
     last_confirmed_ms FROM sites INDEXED BY sites_by_radius WHERE kind = ?1 AND cell = ?2 \
     AND safe_radius_m <= ?3 AND safe_radius_m >= ?4 AND last_confirmed_ms >= ?5 \
     ORDER BY safe_radius_m DESC, id";
 
 /// Freshest first: as [`BY_RADIUS_SQL`], by last confirmation.
-const BY_FRESHNESS_SQL: &str = "SELECT id, latitude_deg, longitude_deg, safe_radius_m, \
+const BY_FRESHNESS_SQL: &str = "SELECT /* cursor */ id, latitude_deg, longitude_deg, safe_radius_m, \
     last_confirmed_ms FROM sites INDEXED BY sites_by_freshness WHERE kind = ?1 AND cell = ?2 \
     AND last_confirmed_ms <= ?3 AND safe_radius_m >= ?4 AND last_confirmed_ms >= ?5 \
     ORDER BY last_confirmed_ms DESC, id";
+
+/// [`BY_RADIUS_SQL`] and [`BY_FRESHNESS_SQL`] once per cursor a search may hold, told apart by
+/// a comment: the statement cache keeps one statement per text, and a search needs its cursors
+/// prepared side by side (preparing them anew each search cost more than the search).
+static CURSOR_SQL: LazyLock<[Vec<String>; 2]> = LazyLock::new(|| {
+    [BY_RADIUS_SQL, BY_FRESHNESS_SQL].map(|sql| {
+        (0..MAX_CELLS)
+            .map(|i| sql.replace("/* cursor */", &format!("/* cursor {i} */")))
+            .collect()
+    })
+});
 
 /// A keyed order's page by the grid: a cursor per cell under the circle's box, each yielding its
 /// admitted records in (key, id) order, merged by a heap until the page is full. Exact: every
@@ -608,20 +619,20 @@ fn keyed_page(
         return Ok(None);
     };
     // The cursor's key as a bound on the indexed column (the exact keyset test is in Rust).
-    let (sql, bound) = match r.order {
+    let (sqls, bound) = match r.order {
         Order::SafeRadius => (
-            BY_RADIUS_SQL,
+            &CURSOR_SQL[0],
             rusqlite::types::Value::Real(after.map_or(f64::MAX, |(key, _)| -key)),
         ),
         _ => (
-            BY_FRESHNESS_SQL,
+            &CURSOR_SQL[1],
             rusqlite::types::Value::Integer(
                 after.map_or(i64::MAX, |(key, _)| (-key).ceil() as i64),
             ),
         ),
     };
     let mut statements = Vec::with_capacity(cells.len());
-    for _ in &cells {
+    for sql in &sqls[..cells.len()] {
         statements.push(conn.prepare_cached(sql).map_err(db)?);
     }
     let mut cursors = Vec::with_capacity(cells.len());
@@ -639,47 +650,48 @@ fn keyed_page(
     }
     let mut heads = BinaryHeap::with_capacity(cursors.len());
     for (i, rows) in cursors.iter_mut().enumerate() {
-        if let Some(head) = next_admitted(rows, i, r, kind, after)? {
+        if let Some(head) = next_head(rows, i, r, kind)? {
             heads.push(Reverse(head));
         }
     }
+    // Records are tested as they leave the heap, in the order's order: a cell that the circle
+    // barely meets is read only as far as the page's last key, not until it yields a record
+    // inside the circle.
     let mut page = Vec::with_capacity(limit);
     while page.len() < limit {
         let Some(Reverse(head)) = heads.pop() else {
             break;
         };
-        if let Some(next) = next_admitted(&mut cursors[head.cursor], head.cursor, r, kind, after)? {
+        if let Some(next) = next_head(&mut cursors[head.cursor], head.cursor, r, kind)? {
             heads.push(Reverse(next));
         }
-        page.push(head.found);
+        let (key, id) = (head.key, head.id);
+        let later = after.is_none_or(|(ak, aid)| key.total_cmp(&ak).then(id.cmp(&aid)).is_gt());
+        if later && r.admits(&head.found.site, head.found.distance_m) {
+            page.push(head.found);
+        }
     }
     Ok(Some(page))
 }
 
-/// A cursor's next record that ranks after the page cursor and that the search admits.
-fn next_admitted(
+/// A cell cursor's next record, with its place in the order.
+fn next_head(
     rows: &mut Rows<'_>,
     cursor: usize,
     r: &Resolved,
     kind: SiteKind,
-    after: Option<(f64, i64)>,
 ) -> Result<Option<Head>> {
-    while let Some(row) = rows.next().map_err(db)? {
-        let site = indexed_site(row, kind).map_err(db)?;
-        let distance_m = distance_m(r.center, site.center);
-        let key = r.sort_key(&site, distance_m);
-        let id = site.id.0;
-        let later = after.is_none_or(|(ak, aid)| key.total_cmp(&ak).then(id.cmp(&aid)).is_gt());
-        if later && r.admits(&site, distance_m) {
-            return Ok(Some(Head {
-                key,
-                id,
-                cursor,
-                found: Found { site, distance_m },
-            }));
-        }
-    }
-    Ok(None)
+    let Some(row) = rows.next().map_err(db)? else {
+        return Ok(None);
+    };
+    let site = indexed_site(row, kind).map_err(db)?;
+    let distance_m = distance_m(r.center, site.center);
+    Ok(Some(Head {
+        key: r.sort_key(&site, distance_m),
+        id: site.id.0,
+        cursor,
+        found: Found { site, distance_m },
+    }))
 }
 
 /// A cell cursor's next record, ordered by (key, id) for the merge.
