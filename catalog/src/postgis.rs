@@ -20,11 +20,11 @@
 //! Searches filter with `ST_DWithin(center, point, r, false)`. Nearest first takes the k nearest
 //! by the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`, bounded by
 //! the circle's box), then re-reads the small circle they fill to order ties by id (see
-//! `NEAREST_SQL`). Largest safe radius first and freshest first do the same on their key: the
-//! nearest-neighbour scan of `catalog_sites_keys` by the key's distance from its largest value
-//! (`btree_gist`'s `<->`) finds the page's k best in the circle, reading index entries and a
-//! page of rows, and a second scan takes every record as good as the k-th, ordered by (key, id)
-//! (see `keyed_sql`). The distance reported is that same sphere distance, so page tokens and
+//! `NEAREST_SQL`). Largest safe radius first and freshest first take the nearest-neighbour scan
+//! of `catalog_sites_keys` by the key's distance from its largest value (`btree_gist`'s `<->`):
+//! the page's k best in the circle and a few more, reading index entries and about a page of
+//! rows, sorted by (key, id) in Rust; the few rows past the k-th show that no tie was left
+//! unread (see `keyed_group`). The distance reported is that same sphere distance, so page tokens and
 //! results agree. Searches are prepared once per connection and planned once, generically
 //! (`plan_cache_mode`, see [`PostgisStore::connect`]). Writers serialise on a
 //! transaction-scoped advisory lock ([`WRITE_LOCK`]): a batch reads what it may change and writes
@@ -171,25 +171,16 @@ static FRESHNESS_SQL: LazyLock<String> = LazyLock::new(|| {
 /// are not exact anyway). A site confirmed before -2^63 + 2^53 ms would overflow the distance.
 const FRESHNESS_ANCHOR_MS: i64 = 1 << 53;
 
-/// A keyed order's search, with `$10` the cursor's key as a bound on `column` (the exact keyset
-/// test is the row comparison). The `knn` scan finds up to k admitted records, best first by
-/// `rank` (an index-ordered distance; only its order matters, not its precision); the least
-/// key among them is a threshold every record of the true first k meets (k records meet it),
-/// so the second scan, of the records meeting it, ordered by (key, id), is exact: ties by id.
-/// Both scans filter alike, so what `knn` counts the second scan admits. An empty `knn` makes
-/// the threshold NULL and the page empty, as it is.
+/// A keyed order's search (see [`keyed_group`]), with `$10` the cursor's key as a bound on
+/// `column` (the exact keyset test is the row comparison): the nearest-neighbour scan of
+/// `catalog_sites_keys` by `rank`, a distance the index orders by and that is monotone in the
+/// key, the rank returned beside the distance. Reads index entries and about a page of rows.
 fn keyed_sql(column: &str, key: &str, rank: &str) -> String {
-    let filters = format!(
-        "kind = $3 AND ST_DWithin(center, {POINT}, $4, false) AND center <-> {POINT} <= $4 \
-         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 AND {column} <= $10 \
-         AND ({key}, id) > ($7, $8)"
-    );
     format!(
-        "WITH knn AS (SELECT {column} AS k FROM catalog_sites WHERE {filters} \
-         ORDER BY {rank} LIMIT $9) \
-         SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
-         WHERE {filters} AND {column} >= (SELECT MIN(k) FROM knn) \
-         ORDER BY {key}, id LIMIT $9"
+        "SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m, ({rank})::float8 AS rank \
+         FROM catalog_sites WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
+         AND center <-> {POINT} <= $4 AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
+         AND {column} <= $10 AND ({key}, id) > ($7, $8) ORDER BY {rank} LIMIT $9"
     )
 }
 
@@ -309,41 +300,15 @@ impl Store for PostgisStore {
                     s
                 }
             };
-            let cutoff = match kind {
-                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
-                SiteKind::Candidate => i64::MIN,
-            };
-            let (after_key, after_id) = after.unwrap_or((f64::NEG_INFINITY, i64::MIN));
-            let limit = i64::try_from(limit).unwrap_or(i64::MAX);
-            let kind = kind_code(kind);
-            // The keyed orders' `$10`: the cursor's key as a bound on the key's column.
-            let radius_bound = -after_key;
-            let time_bound = (-after_key).ceil() as i64;
-            let mut params: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![
-                &r.center.latitude_deg,
-                &r.center.longitude_deg,
-                &kind,
-                &r.radius_m,
-                &r.min_safe_radius_m,
-                &cutoff,
-                &after_key,
-                &after_id,
-                &limit,
-            ];
-            match (nearest_first, r.order) {
-                (true, _) => {}
-                (false, Order::SafeRadius) => params.push(&radius_bound),
-                (false, _) => params.push(&time_bound),
+            let p = GroupParams::new(r, kind, after, !nearest_first);
+            if nearest_first {
+                return Ok(p
+                    .query(client, &stmt, limit)?
+                    .into_iter()
+                    .map(|(f, _)| f)
+                    .collect());
             }
-            let rows = client.query(&stmt, &params).map_err(db)?;
-            rows.iter()
-                .map(|row| {
-                    Ok(Found {
-                        site: site_from_row(row)?,
-                        distance_m: row.get(16),
-                    })
-                })
-                .collect()
+            keyed_group(client, &stmt, &p, r, limit)
         })
     }
 
@@ -462,6 +427,118 @@ impl Store for PostgisStore {
             });
         }
         Ok(())
+    }
+}
+
+/// A search statement's parameters for one group (see [`NEAREST_SQL`] and [`keyed_sql`]).
+struct GroupParams {
+    latitude_deg: f64,
+    longitude_deg: f64,
+    kind: i16,
+    radius_m: f64,
+    min_safe_radius_m: f64,
+    cutoff: i64,
+    after_key: f64,
+    after_id: i64,
+    /// The keyed orders' `$10`, the cursor's key as a bound on the key's column.
+    bound: Option<Box<dyn postgres::types::ToSql + Sync>>,
+}
+
+impl GroupParams {
+    fn new(r: &Resolved, kind: SiteKind, after: Option<(f64, i64)>, keyed: bool) -> Self {
+        let (after_key, after_id) = after.unwrap_or((f64::NEG_INFINITY, i64::MIN));
+        let bound: Option<Box<dyn postgres::types::ToSql + Sync>> = match (keyed, r.order) {
+            (false, _) => None,
+            (true, Order::SafeRadius) => Some(Box::new(-after_key)),
+            (true, _) => Some(Box::new((-after_key).ceil() as i64)),
+        };
+        GroupParams {
+            latitude_deg: r.center.latitude_deg,
+            longitude_deg: r.center.longitude_deg,
+            kind: kind_code(kind),
+            radius_m: r.radius_m,
+            min_safe_radius_m: r.min_safe_radius_m,
+            cutoff: match kind {
+                SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+                SiteKind::Candidate => i64::MIN,
+            },
+            after_key,
+            after_id,
+            bound,
+        }
+    }
+
+    /// Up to `limit` rows: each record, its distance and (keyed orders) its rank.
+    fn query(
+        &self,
+        client: &mut Client,
+        stmt: &Statement,
+        limit: usize,
+    ) -> Result<Vec<(Found, Option<f64>)>> {
+        let limit = i64::try_from(limit).unwrap_or(i64::MAX);
+        let mut params: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![
+            &self.latitude_deg,
+            &self.longitude_deg,
+            &self.kind,
+            &self.radius_m,
+            &self.min_safe_radius_m,
+            &self.cutoff,
+            &self.after_key,
+            &self.after_id,
+            &limit,
+        ];
+        if let Some(b) = &self.bound {
+            params.push(b.as_ref());
+        }
+        let rows = client.query(stmt, &params).map_err(db)?;
+        let keyed = self.bound.is_some();
+        rows.iter()
+            .map(|row| {
+                let found = Found {
+                    site: site_from_row(row)?,
+                    distance_m: row.get(16),
+                };
+                Ok((found, keyed.then(|| row.get(17))))
+            })
+            .collect()
+    }
+}
+
+/// Rows a keyed search reads beyond the page, so that its last row usually ranks after the
+/// page's last and shows that no tie with it was left unread.
+const KEYED_SLACK: usize = 8;
+
+/// A keyed order's group: the nearest-neighbour scan's first `limit` + [`KEYED_SLACK`] rows by
+/// rank, sorted by (key, id). Exact when the scan ran out or its last row ranks after the
+/// `limit`-th: the rank is monotone in the key, so every record as good as the `limit`-th best
+/// was read (ties by id included). Otherwise (a run of equal keys longer than the slack) it
+/// reads four times as many and looks again.
+fn keyed_group(
+    client: &mut Client,
+    stmt: &Statement,
+    p: &GroupParams,
+    r: &Resolved,
+    limit: usize,
+) -> Result<Vec<Found>> {
+    let mut fetch = limit + KEYED_SLACK;
+    loop {
+        let rows = p.query(client, stmt, fetch)?;
+        let ranks_past = match (rows.get(limit - 1), rows.last()) {
+            (Some(nth), Some(last)) => nth.1 < last.1,
+            _ => true,
+        };
+        if rows.len() < fetch || ranks_past {
+            let mut found: Vec<Found> = rows.into_iter().map(|(f, _)| f).collect();
+            let key = |f: &Found| (r.sort_key(&f.site, f.distance_m), f.site.id.0);
+            found.sort_by(|a, b| {
+                let (ka, ia) = key(a);
+                let (kb, ib) = key(b);
+                ka.total_cmp(&kb).then(ia.cmp(&ib))
+            });
+            found.truncate(limit);
+            return Ok(found);
+        }
+        fetch = fetch.saturating_mul(4);
     }
 }
 
