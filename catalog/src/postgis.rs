@@ -17,14 +17,13 @@
 //!              area geography(POLYGON, 4326), bbox geometry)     -- GiST on bbox
 //! ```
 //!
-//! Searches filter with `ST_DWithin(center, point, r, false)`. Nearest first takes the k nearest
-//! by the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`, bounded by
-//! the circle's box), then re-reads the small circle they fill to order ties by id (see
-//! `NEAREST_SQL`). Largest safe radius first and freshest first take the nearest-neighbour scan
-//! of `catalog_sites_keys` by the key's distance from its largest value (`btree_gist`'s `<->`):
-//! the page's k best in the circle and a few more, reading index entries and about a page of
-//! rows, sorted by (key, id) in Rust; the few rows past the k-th show that no tie was left
-//! unread (see `keyed_group`). The distance reported is that same sphere distance, so page tokens and
+//! Searches filter with `ST_DWithin(center, point, r, false)`. Every order is one
+//! nearest-neighbour scan of a GiST index, bounded by the circle's box, for the page's k best
+//! and a few more: nearest first by `center <-> point` (`catalog_sites_center`), largest safe
+//! radius first and freshest first by the key's distance from its best value (`btree_gist`'s
+//! `<->` over `catalog_sites_keys`). It reads index entries and about a page of rows; Rust
+//! sorts them by (key, id), and the few rows past the k-th show that no tie was left unread
+//! (see `ranked_group`). The distance reported is that same sphere distance, so page tokens and
 //! results agree. Searches are prepared once per connection and planned once, generically
 //! (`plan_cache_mode`, see [`PostgisStore::connect`]). Writers serialise on a
 //! transaction-scoped advisory lock ([`WRITE_LOCK`]): a batch reads what it may change and writes
@@ -70,9 +69,10 @@ pub const STATEMENT_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// What a connection's searches are planned by, set when it connects: one generic plan per
 /// prepared search. PostgreSQL's default plans a statement's first five executions for their
-/// values, and for the keyed orders those plans (estimating a handful of rows in the circle)
-/// read and sort the whole circle: 60-95 ms at a million sites, against 1 ms for the generic
-/// plan, which keeps the index's order. Writes go back to the default for their transaction.
+/// values, and those plans (estimating a handful of rows in the circle) read and sort the whole
+/// circle instead of scanning the index in order: 60-95 ms at a million sites for every order
+/// (nearest first too: 76 ms p50 by `EXPLAIN ANALYZE`), against about 1 ms for the generic plan.
+/// Writes go back to the default for their transaction.
 const SEARCH_PLANS: &str = "SET plan_cache_mode = force_generic_plan";
 
 const MIGRATIONS: &[&str] = &[
@@ -124,46 +124,37 @@ const POINT: &str = "ST_SetSRID(ST_MakePoint($2, $1), 4326)::geography";
 
 /// A search's parameters, in every search statement: `$1` latitude, `$2` longitude, `$3` kind,
 /// `$4` radius, `$5` minimum safe radius, `$6` age cut-off (ms), `$7`, `$8` the keyset position
-/// (sort key, id) to start after, `$9` how many.
+/// (sort key, id) to start after, `$9` how many; the keyed orders add `$10` (see [`ranked_sql`]).
 ///
 /// Nearest first: the GiST index's nearest-neighbour scan (`ORDER BY center <-> point LIMIT k`,
-/// bounded by the circle's box so a sparse area does not scan on) finds the k nearest; a
-/// second scan of the circle they fill takes every record as near as the k-th, so ties are
-/// ordered by id (a KNN scan orders by distance alone; `ORDER BY distance, id` would read and
-/// sort the whole search circle instead).
+/// bounded by the circle's box so a sparse area does not scan on), which PostGIS rechecks so
+/// that rows come in the exact order of the distance reported; ties are ordered by id in Rust
+/// ([`ranked_group`]). `ORDER BY distance, id` would read and sort the whole search circle.
 static NEAREST_SQL: LazyLock<String> = LazyLock::new(|| {
-    format!(
-        "WITH knn AS (SELECT center <-> {POINT} AS d FROM catalog_sites \
-         WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
-         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
-         AND (center <-> {POINT}, id) > ($7, $8) \
-         ORDER BY center <-> {POINT} LIMIT $9) \
-         SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m FROM catalog_sites \
-         WHERE kind = $3 AND ST_DWithin(center, {POINT}, (SELECT MAX(d) FROM knn) + 1, false) \
-         AND center <-> {POINT} <= (SELECT MAX(d) FROM knn) AND center <-> {POINT} <= $4 \
-         AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
-         AND (center <-> {POINT}, id) > ($7, $8) \
-         ORDER BY center <-> {POINT}, id LIMIT $9"
+    ranked_sql(
+        &format!("center <-> {POINT}"),
+        &format!("center <-> {POINT}"),
+        "TRUE",
     )
 });
 
-/// Largest safe radius first (see [`keyed_sql`]); the nearest-neighbour scan ranks by the
+/// Largest safe radius first (see [`ranked_sql`]); the nearest-neighbour scan ranks by the
 /// distance from the largest radius a site may have.
 static SAFE_RADIUS_SQL: LazyLock<String> = LazyLock::new(|| {
-    keyed_sql(
-        "safe_radius_m",
+    ranked_sql(
         "(-safe_radius_m)",
         &format!("safe_radius_m <-> {MAX_RADIUS_M:.1}::float8"),
+        "safe_radius_m <= $10",
     )
 });
 
-/// Most recently confirmed first (see [`keyed_sql`]); the nearest-neighbour scan ranks by the
+/// Most recently confirmed first (see [`ranked_sql`]); the nearest-neighbour scan ranks by the
 /// distance from [`FRESHNESS_ANCHOR_MS`].
 static FRESHNESS_SQL: LazyLock<String> = LazyLock::new(|| {
-    keyed_sql(
-        "last_confirmed_ms",
+    ranked_sql(
         "(-(last_confirmed_ms::float8))",
         &format!("last_confirmed_ms <-> {FRESHNESS_ANCHOR_MS}::int8"),
+        "last_confirmed_ms <= $10",
     )
 });
 
@@ -171,16 +162,18 @@ static FRESHNESS_SQL: LazyLock<String> = LazyLock::new(|| {
 /// are not exact anyway). A site confirmed before -2^63 + 2^53 ms would overflow the distance.
 const FRESHNESS_ANCHOR_MS: i64 = 1 << 53;
 
-/// A keyed order's search (see [`keyed_group`]), with `$10` the cursor's key as a bound on
-/// `column` (the exact keyset test is the row comparison): the nearest-neighbour scan of
-/// `catalog_sites_keys` by `rank`, a distance the index orders by and that is monotone in the
-/// key, the rank returned beside the distance. Reads index entries and about a page of rows.
-fn keyed_sql(column: &str, key: &str, rank: &str) -> String {
+/// A search by an order's `key` (see [`ranked_group`]): the nearest-neighbour scan by `rank`,
+/// a distance the index orders by and that is monotone in the key (the key itself for nearest
+/// first; for the keyed orders the key's distance from its best value, by `btree_gist`'s `<->`
+/// over `catalog_sites_keys`, with `bound` taking the cursor's key `$10` as a bound on the
+/// key's column), the rank returned beside the distance. The exact keyset test is the row
+/// comparison. Reads index entries and about a page of rows.
+fn ranked_sql(key: &str, rank: &str, bound: &str) -> String {
     format!(
         "SELECT {SITE_COLUMNS}, center <-> {POINT} AS distance_m, ({rank})::float8 AS rank \
          FROM catalog_sites WHERE kind = $3 AND ST_DWithin(center, {POINT}, $4, false) \
          AND center <-> {POINT} <= $4 AND safe_radius_m >= $5 AND last_confirmed_ms >= $6 \
-         AND {column} <= $10 AND ({key}, id) > ($7, $8) ORDER BY {rank} LIMIT $9"
+         AND {bound} AND ({key}, id) > ($7, $8) ORDER BY {rank} LIMIT $9"
     )
 }
 
@@ -301,14 +294,7 @@ impl Store for PostgisStore {
                 }
             };
             let p = GroupParams::new(r, kind, after, !nearest_first);
-            if nearest_first {
-                return Ok(p
-                    .query(client, &stmt, limit)?
-                    .into_iter()
-                    .map(|(f, _)| f)
-                    .collect());
-            }
-            keyed_group(client, &stmt, &p, r, limit)
+            ranked_group(client, &stmt, &p, r, limit)
         })
     }
 
@@ -430,7 +416,7 @@ impl Store for PostgisStore {
     }
 }
 
-/// A search statement's parameters for one group (see [`NEAREST_SQL`] and [`keyed_sql`]).
+/// A search statement's parameters for one group (see [`NEAREST_SQL`] and [`ranked_sql`]).
 struct GroupParams {
     latitude_deg: f64,
     longitude_deg: f64,
@@ -468,13 +454,13 @@ impl GroupParams {
         }
     }
 
-    /// Up to `limit` rows: each record, its distance and (keyed orders) its rank.
+    /// Up to `limit` rows: each record, its distance and its rank.
     fn query(
         &self,
         client: &mut Client,
         stmt: &Statement,
         limit: usize,
-    ) -> Result<Vec<(Found, Option<f64>)>> {
+    ) -> Result<Vec<(Found, f64)>> {
         let limit = i64::try_from(limit).unwrap_or(i64::MAX);
         let mut params: Vec<&(dyn postgres::types::ToSql + Sync)> = vec![
             &self.latitude_deg,
@@ -491,36 +477,35 @@ impl GroupParams {
             params.push(b.as_ref());
         }
         let rows = client.query(stmt, &params).map_err(db)?;
-        let keyed = self.bound.is_some();
         rows.iter()
             .map(|row| {
                 let found = Found {
                     site: site_from_row(row)?,
                     distance_m: row.get(16),
                 };
-                Ok((found, keyed.then(|| row.get(17))))
+                Ok((found, row.get(17)))
             })
             .collect()
     }
 }
 
-/// Rows a keyed search reads beyond the page, so that its last row usually ranks after the
-/// page's last and shows that no tie with it was left unread.
-const KEYED_SLACK: usize = 8;
+/// Rows a search reads beyond the page, so that its last row usually ranks after the page's
+/// last and shows that no tie with it was left unread.
+const RANK_SLACK: usize = 8;
 
-/// A keyed order's group: the nearest-neighbour scan's first `limit` + [`KEYED_SLACK`] rows by
-/// rank, sorted by (key, id). Exact when the scan ran out or its last row ranks after the
+/// One group's page: the nearest-neighbour scan's first `limit` + [`RANK_SLACK`] rows by rank,
+/// sorted by (key, id). Exact when the scan ran out or its last row ranks after the
 /// `limit`-th: the rank is monotone in the key, so every record as good as the `limit`-th best
 /// was read (ties by id included). Otherwise (a run of equal keys longer than the slack) it
 /// reads four times as many and looks again.
-fn keyed_group(
+fn ranked_group(
     client: &mut Client,
     stmt: &Statement,
     p: &GroupParams,
     r: &Resolved,
     limit: usize,
 ) -> Result<Vec<Found>> {
-    let mut fetch = limit + KEYED_SLACK;
+    let mut fetch = limit + RANK_SLACK;
     loop {
         let rows = p.query(client, stmt, fetch)?;
         let ranks_past = match (rows.get(limit - 1), rows.last()) {
