@@ -12,7 +12,7 @@
 //!               first_seen_ms, last_confirmed_ms, frames, approaches BIGINT,
 //!               drone_id, approach_id, model_id TEXT, source_id TEXT UNIQUE)
 //! catalog_sites_keys USING GIST (center, kind, safe_radius_m, last_confirmed_ms)
-//!                                                                -- (version 2) btree_gist
+//! catalog_sites_radius USING GIST (safe_radius_m, center, kind)  -- (version 2) btree_gist
 //! catalog_seen(id BIGSERIAL PRIMARY KEY, observed_ms BIGINT,
 //!              area geography(POLYGON, 4326), bbox geometry)     -- GiST on bbox
 //! ```
@@ -21,7 +21,9 @@
 //! nearest-neighbour scan of a GiST index, bounded by the circle's box, for the page's k best
 //! and a few more: nearest first by `center <-> point` (`catalog_sites_center`), largest safe
 //! radius first and freshest first by the key's distance from its best value (`btree_gist`'s
-//! `<->` over `catalog_sites_keys`). It reads index entries and about a page of rows; Rust
+//! `<->`): radius over `catalog_sites_radius`, whose tree splits by radius before place (split
+//! by place, nearly every leaf in a circle holds a radius near the 15 m top and is read), and
+//! freshness over `catalog_sites_keys`. It reads index entries and about a page of rows; Rust
 //! sorts them by (key, id), and the few rows past the k-th show that no tie was left unread
 //! (see `ranked_group`). The distance reported is that same sphere distance, so page tokens and
 //! results agree. Searches are prepared once per connection and planned once, generically
@@ -112,6 +114,7 @@ CREATE INDEX catalog_seen_observed ON catalog_seen (observed_ms);
 CREATE EXTENSION IF NOT EXISTS btree_gist;
 CREATE INDEX catalog_sites_keys ON catalog_sites
     USING GIST (center, kind, safe_radius_m, last_confirmed_ms);
+CREATE INDEX catalog_sites_radius ON catalog_sites USING GIST (safe_radius_m, center, kind);
 "#,
 ];
 

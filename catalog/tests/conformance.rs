@@ -1401,7 +1401,7 @@ mod specific {
         keyed_orders_answer(&store);
     }
 
-    /// A database at schema version 1 (no `btree_gist`, no keyed index) is migrated at connect.
+    /// A database at schema version 1 (no `btree_gist`, no keyed indexes) is migrated at connect.
     #[test]
     fn postgis_version_1_schema_is_migrated() {
         let server = pg::shared();
@@ -1412,7 +1412,8 @@ mod specific {
             .unwrap();
         let mut raw = postgres::Client::connect(&url, postgres::NoTls).unwrap();
         raw.batch_execute(
-            "DROP INDEX catalog_sites_keys; DROP EXTENSION btree_gist;
+            "DROP INDEX catalog_sites_keys; DROP INDEX catalog_sites_radius;
+             DROP EXTENSION btree_gist;
              DELETE FROM catalog_schema_version WHERE version = 2;",
         )
         .unwrap();
