@@ -198,7 +198,8 @@ impl std::fmt::Debug for PostgisStore {
 impl PostgisStore {
     /// Connects to `url` (`postgres://user:password@host:port/database`, or the key=value form)
     /// and brings the schema up to date. The database user needs `CREATE` there, and the
-    /// PostGIS extension must exist or be creatable.
+    /// PostGIS and `btree_gist` (PostgreSQL's contrib; a trusted extension, so a database owner
+    /// may create it) extensions must exist or be creatable.
     ///
     /// No call waits on a lost server for long: what the URL leaves unset gets
     /// [`CONNECT_TIMEOUT`] to connect, TCP keepalives after [`KEEPALIVE_IDLE`] and a TCP user
