@@ -10,7 +10,8 @@
 //! temporary PostgreSQL + PostGIS server started as the tests start theirs: needs the
 //! distribution's packages, `scripts/setup-postgres.sh`) or a connection string
 //! (`postgres://…`, `host=… dbname=…`) to an empty database. Other flags: `--queries N` per
-//! order and round (default 2000), `--rounds R` (default 2), `--seed S` (default 41).
+//! order and round (default 2000), `--rounds R` (default 2), `--seed S` (default 41), `--apply N`
+//! observations applied after the searches, timed (default 2000; 0: none).
 //!
 //! The city: roofs (8-40 m half-width) half spread evenly, half clustered in twelve districts
 //! (Gaussian, σ 1.5-3 km); 1-8 sites per roof, safe radii 1-15 m (small ones commoner), each
@@ -25,8 +26,8 @@ mod pg;
 use std::time::{Duration, Instant};
 
 use landing_catalog::{
-    LatLon, LocalFrame, Order, Polygon, PostgisStore, SearchQuery, Site, SiteId, SiteKind,
-    SqliteStore, Store, Timestamp, distance_m,
+    LatLon, LocalFrame, Observation, ObservedSite, Order, Polygon, PostgisStore, SearchQuery, Site,
+    SiteId, SiteKind, SqliteStore, Store, Timestamp, distance_m,
 };
 
 const CITY_HALF_M: f64 = 10_000.0;
@@ -35,6 +36,7 @@ const NOW_MS: i64 = 1_796_588_100_000;
 const DAY_MS: f64 = 86_400_000.0;
 const LOAD_BATCH: usize = 20_000;
 const QUERY_RADIUS_M: f64 = 500.0;
+const APPLY_BATCH: usize = 50;
 
 struct Args {
     sites: usize,
@@ -42,6 +44,7 @@ struct Args {
     queries: usize,
     rounds: usize,
     seed: u64,
+    apply: usize,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -51,6 +54,7 @@ fn parse_args() -> Result<Args, String> {
         queries: 2000,
         rounds: 2,
         seed: 41,
+        apply: 2000,
     };
     let mut it = std::env::args().skip(1);
     while let Some(flag) = it.next() {
@@ -62,6 +66,7 @@ fn parse_args() -> Result<Args, String> {
             "--queries" => a.queries = number(value()?)? as usize,
             "--rounds" => a.rounds = number(value()?)?.max(1) as usize,
             "--seed" => a.seed = number(value()?)?,
+            "--apply" => a.apply = number(value()?)? as usize,
             other => return Err(format!("unknown flag {other}")),
         }
     }
@@ -258,27 +263,8 @@ fn main() -> Result<(), String> {
         t0.elapsed().as_secs_f64(),
         args.seed
     );
-
     let (store, _guard, pg_url) = open(&args.store)?;
-    let t0 = Instant::now();
-    for batch in sites.chunks(LOAD_BATCH) {
-        store.load_sites(batch).map_err(|e| e.to_string())?;
-    }
-    let load_s = t0.elapsed().as_secs_f64();
-    println!(
-        "store {}: loaded in {load_s:.1} s: {:.0} sites/s (batches of {LOAD_BATCH}, one transaction each)",
-        store.backend(),
-        sites.len() as f64 / load_s
-    );
-    if let Some(url) = &pg_url {
-        // What autovacuum would do on its own a little later: statistics and the visibility map.
-        let t0 = Instant::now();
-        postgres::Client::connect(url, postgres::NoTls)
-            .and_then(|mut c| c.batch_execute("VACUUM ANALYZE catalog_sites"))
-            .map_err(|e| e.to_string())?;
-        println!("VACUUM ANALYZE in {:.1} s", t0.elapsed().as_secs_f64());
-    }
-
+    load(&*store, &sites, pg_url.as_deref())?;
     let f = LocalFrame::new(ORIGIN);
     let centers: Vec<LatLon> = (0..args.queries)
         .map(|_| f.to_lat_lon(city.place(&mut rng)))
@@ -290,6 +276,38 @@ fn main() -> Result<(), String> {
         in_circle.1,
         centers.len().min(200)
     );
+    time_searches(&*store, &centers, args.rounds)?;
+    if args.apply > 0 {
+        time_applies(&*store, &sites, args.apply, &mut rng)?;
+    }
+    Ok(())
+}
+
+/// Loads the records in batches and, on PostGIS, gathers statistics as autovacuum would.
+fn load(store: &dyn Store, sites: &[Site], pg_url: Option<&str>) -> Result<(), String> {
+    let t0 = Instant::now();
+    for batch in sites.chunks(LOAD_BATCH) {
+        store.load_sites(batch).map_err(|e| e.to_string())?;
+    }
+    let load_s = t0.elapsed().as_secs_f64();
+    println!(
+        "store {}: loaded in {load_s:.1} s: {:.0} sites/s (batches of {LOAD_BATCH}, one transaction each)",
+        store.backend(),
+        sites.len() as f64 / load_s
+    );
+    if let Some(url) = pg_url {
+        // What autovacuum would do on its own a little later: statistics and the visibility map.
+        let t0 = Instant::now();
+        postgres::Client::connect(url, postgres::NoTls)
+            .and_then(|mut c| c.batch_execute("VACUUM ANALYZE catalog_sites"))
+            .map_err(|e| e.to_string())?;
+        println!("VACUUM ANALYZE in {:.1} s", t0.elapsed().as_secs_f64());
+    }
+    Ok(())
+}
+
+/// Times first pages in each order (and nearest first's second page), `rounds` times over.
+fn time_searches(store: &dyn Store, centers: &[LatLon], rounds: usize) -> Result<(), String> {
     let now = Timestamp::from_unix_ms(NOW_MS);
     let kinds: [(&str, Order, bool); 4] = [
         ("distance", Order::Distance, false),
@@ -304,11 +322,11 @@ fn main() -> Result<(), String> {
     }
     println!("| round | query | p50 ms | p99 ms | max ms | mean results |");
     println!("|---|---|---|---|---|---|");
-    for round in 1..=args.rounds {
+    for round in 1..=rounds {
         for (name, order, second_page) in kinds {
             let mut times = Vec::with_capacity(centers.len());
             let mut results = 0usize;
-            for c in &centers {
+            for c in centers {
                 let mut q = SearchQuery::new(*c, QUERY_RADIUS_M);
                 q.page_size = 20;
                 q.order = order;
@@ -334,6 +352,49 @@ fn main() -> Result<(), String> {
             );
         }
     }
+    Ok(())
+}
+
+/// Times the update rule's writes: `n` observations, each a drone confirming one stored site
+/// again (its polygon seen, the site found as it was: an update of its confirmation time; sites
+/// beside it whose circles meet the seen polygon are withdrawn), in batches of [`APPLY_BATCH`]
+/// as the server's write queue sends them. Runs after the searches: it changes the catalog.
+fn time_applies(store: &dyn Store, sites: &[Site], n: usize, rng: &mut Rng) -> Result<(), String> {
+    let confirmed: Vec<&Site> = sites
+        .iter()
+        .filter(|s| s.kind == SiteKind::Confirmed)
+        .collect();
+    let observations: Vec<Observation> = (0..n)
+        .map(|i| {
+            let s = confirmed[(rng.next() % confirmed.len() as u64) as usize];
+            Observation {
+                t: Timestamp::from_unix_ms(NOW_MS + i as i64 * 100),
+                drone_id: "drone-bench".into(),
+                approach_id: format!("bench-{i}"),
+                model_id: s.model_id.clone(),
+                seen: vec![s.polygon.clone()],
+                sites: vec![ObservedSite {
+                    polygon: s.polygon.clone(),
+                    center: s.center,
+                    safe_radius_m: s.safe_radius_m,
+                    plane_height_m: s.plane_height_m,
+                    frames: 1,
+                }],
+            }
+        })
+        .collect();
+    let t0 = Instant::now();
+    let mut updated = 0;
+    for batch in observations.chunks(APPLY_BATCH) {
+        let report = store.apply(batch).map_err(|e| e.to_string())?;
+        updated += report.updated;
+    }
+    let s = t0.elapsed().as_secs_f64();
+    println!(
+        "apply: {n} observations in batches of {APPLY_BATCH} in {s:.2} s: {:.0} observations/s, {:.1} ms a batch ({updated} sites updated)",
+        n as f64 / s,
+        s * 1000.0 / n.div_ceil(APPLY_BATCH) as f64
+    );
     Ok(())
 }
 

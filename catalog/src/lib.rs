@@ -88,6 +88,7 @@
 #![warn(missing_docs)]
 
 mod apply;
+mod cells;
 mod error;
 pub mod geo;
 pub mod geojson;

@@ -1,6 +1,6 @@
 //! The embedded store: one SQLite file (WAL), sites indexed by an R*Tree over their boxes.
 //!
-//! # Schema (version 2)
+//! # Schema (version 3)
 //!
 //! ```sql
 //! schema_version(version INTEGER)                   -- one row per applied migration
@@ -9,7 +9,12 @@
 //!       latitude_deg REAL, longitude_deg REAL,      -- the safest point
 //!       safe_radius_m REAL, plane_height_m REAL, area_m2 REAL,
 //!       first_seen_ms INTEGER, last_confirmed_ms INTEGER, frames INTEGER, approaches INTEGER,
-//!       drone_id TEXT, approach_id TEXT, model_id TEXT, source_id TEXT UNIQUE)
+//!       drone_id TEXT, approach_id TEXT, model_id TEXT, source_id TEXT UNIQUE,
+//!       cell INTEGER)                               -- (version 3) the grid cell, crate::cells
+//! sites_by_radius ON sites(kind, cell, safe_radius_m DESC, id, latitude_deg, longitude_deg,
+//!       last_confirmed_ms)                          -- (version 3) each order's key per cell,
+//! sites_by_freshness ON sites(kind, cell, last_confirmed_ms DESC, id, latitude_deg,
+//!       longitude_deg, safe_radius_m)               -- covering what a search tests
 //! sites_rtree USING rtree(id, min_lat, max_lat, min_lon, max_lon,   -- polygon ∪ safe circle
 //!       +kind, +latitude_deg, +longitude_deg,       -- (version 2) auxiliary copies of what a
 //!       +safe_radius_m, +last_confirmed_ms)         -- search filters and orders by
@@ -21,18 +26,28 @@
 //! boxes meeting the search circle's box (padded), then measures, filters and orders in Rust;
 //! what it filters and orders by is read from the R*Tree's auxiliary columns (no lookup in
 //! `sites` per box), whole records only for the page. Nearest first reads a small circle first
-//! and widens it threefold until it holds the page; the other orders read the whole circle.
+//! and widens it threefold until it holds the page. Largest safe radius first and freshest first
+//! read the grid cells ([`crate::cells`]) under the circle's box side by side, each in its order's
+//! index from its best record on, and merge them until the page is full: about a page plus one
+//! record per cell (a 500 m circle: 20-30 cells), not the whole circle. A circle narrower than
+//! [`GRID_MIN_RADIUS_M`] or wider than [`MAX_CELLS`] cells reads the whole circle instead (few
+//! records; or too many cells to open a cursor on each).
 //! Writes take SQLite's write lock at `BEGIN IMMEDIATE`; other connections wait for it up to the
 //! busy timeout (5 s). WAL with `synchronous = NORMAL`: a process killed mid-write loses at most
 //! the transaction in flight (one `apply` batch); a power cut may also lose the last few commits.
 
+use std::cmp::{Ordering, Reverse};
+use std::collections::BinaryHeap;
 use std::path::Path;
-use std::sync::{Mutex, MutexGuard};
+use std::sync::{LazyLock, Mutex, MutexGuard};
 use std::time::Duration;
 
-use rusqlite::{Connection, OptionalExtension, Row, Transaction, TransactionBehavior, params};
+use rusqlite::{
+    Connection, OptionalExtension, Row, Rows, Transaction, TransactionBehavior, params,
+};
 
 use crate::apply::{BOX_PAD_M, WriteTx, apply_sorted, validate};
+use crate::cells;
 use crate::error::{Error, Result};
 use crate::geo::{Bbox, LatLon, Polygon, distance_m};
 use crate::geojson::{polygon_geometry, stored_count, stored_polygon};
@@ -48,6 +63,13 @@ const BACKEND: &str = "sqlite";
 /// (it grows threefold until it holds the page).
 const FIRST_REACH_M: f64 = 64.0;
 
+/// Circles narrower than this read their whole circle by the R*Tree for the keyed orders (it
+/// holds a few records; the cells under it hold many more).
+pub const GRID_MIN_RADIUS_M: f64 = 150.0;
+/// The most grid cells a keyed search reads side by side (one prepared cursor each): a circle of
+/// about 1.5 km radius at mid latitudes; a wider one reads its whole circle.
+pub const MAX_CELLS: usize = 256;
+
 /// How much of the file each connection maps into memory (shared with the OS page cache).
 const MMAP_BYTES: u64 = 1 << 30;
 /// Each connection's page cache, KiB.
@@ -57,8 +79,9 @@ const CACHE_KIB: u64 = 32 * 1024;
 pub const BUSY_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The migrations, in order: the schema is at version `MIGRATIONS.len()`. Version 2 rebuilds the
-/// sites' R*Tree with auxiliary columns: opening a version-1 file of a million sites takes some
-/// seconds once.
+/// sites' R*Tree with auxiliary columns, version 3 numbers every site's grid cell (by
+/// `cells::cell_sql!`) and builds the two keyed indexes: opening an older
+/// file of a million sites takes some seconds once.
 const MIGRATIONS: &[&str] = &[
     r#"
 CREATE TABLE sites (
@@ -98,6 +121,17 @@ INSERT INTO sites_rtree_v2 SELECT t.id, t.min_lat, t.max_lat, t.min_lon, t.max_l
 DROP TABLE sites_rtree;
 ALTER TABLE sites_rtree_v2 RENAME TO sites_rtree;
 "#,
+    concat!(
+        "ALTER TABLE sites ADD COLUMN cell INTEGER NOT NULL DEFAULT 0;
+UPDATE sites SET cell = ",
+        cells::cell_sql!(),
+        ";
+CREATE INDEX sites_by_radius ON sites (kind, cell, safe_radius_m DESC, id, latitude_deg,
+    longitude_deg, last_confirmed_ms);
+CREATE INDEX sites_by_freshness ON sites (kind, cell, last_confirmed_ms DESC, id, latitude_deg,
+    longitude_deg, safe_radius_m);
+"
+    ),
 ];
 
 const SITE_COLUMNS: &str = "s.id, s.kind, s.polygon, s.latitude_deg, s.longitude_deg, \
@@ -135,6 +169,8 @@ impl SqliteStore {
              PRAGMA cache_size = -{CACHE_KIB};"
         ))
         .map_err(db)?;
+        // A keyed search holds one cursor per cell at once, each its own cached statement.
+        conn.set_prepared_statement_cache_capacity(2 * MAX_CELLS + 16);
         migrate(&mut conn)?;
         Ok(SqliteStore {
             conn: Mutex::new(conn),
@@ -377,8 +413,8 @@ impl WriteTx for SqliteTx<'_> {
             .prepare_cached(
                 "INSERT INTO sites (kind, polygon, latitude_deg, longitude_deg, safe_radius_m, \
                  plane_height_m, area_m2, first_seen_ms, last_confirmed_ms, frames, approaches, \
-                 drone_id, approach_id, model_id, source_id) \
-                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15)",
+                 drone_id, approach_id, model_id, source_id, cell) \
+                 VALUES (?1, ?2, ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?11, ?12, ?13, ?14, ?15, ?16)",
             )
             .map_err(db)?
             .execute(params![
@@ -397,6 +433,7 @@ impl WriteTx for SqliteTx<'_> {
                 s.approach_id,
                 s.model_id,
                 s.source_id,
+                cells::cell_of(s.center),
             ])
             .map_err(db)?;
         let id = self.tx.last_insert_rowid();
@@ -410,7 +447,7 @@ impl WriteTx for SqliteTx<'_> {
                 "UPDATE sites SET polygon = ?2, latitude_deg = ?3, longitude_deg = ?4, \
                  safe_radius_m = ?5, plane_height_m = ?6, area_m2 = ?7, first_seen_ms = ?8, \
                  last_confirmed_ms = ?9, frames = ?10, approaches = ?11, drone_id = ?12, \
-                 approach_id = ?13, model_id = ?14 WHERE id = ?1",
+                 approach_id = ?13, model_id = ?14, cell = ?15 WHERE id = ?1",
             )
             .map_err(db)?
             .execute(params![
@@ -428,6 +465,7 @@ impl WriteTx for SqliteTx<'_> {
                 s.drone_id,
                 s.approach_id,
                 s.model_id,
+                cells::cell_of(s.center),
             ])
             .map_err(db)?;
         self.tx
@@ -505,10 +543,10 @@ impl SqliteTx<'_> {
     }
 }
 
-/// One kind's page of a search, its records holding only what filters and orders them: from the
-/// R*Tree alone (its auxiliary columns). Nearest first reads a small circle first and widens it
-/// until it holds the page: everything within `reach` is read, so what lies beyond ranks after
-/// the page. The other orders need the whole circle.
+/// One kind's page of a search, its records holding only what filters and orders them (from an
+/// index alone). Nearest first reads a small circle first and widens it until it holds the page:
+/// everything within `reach` is read, so what lies beyond ranks after the page. The keyed orders
+/// merge the grid's cells ([`keyed_page`]), or read the whole circle where that is not used.
 fn group_page(
     conn: &Connection,
     r: &Resolved,
@@ -520,6 +558,9 @@ fn group_page(
         (r.order, kind),
         (Order::Distance, _) | (Order::Freshness, SiteKind::Candidate)
     );
+    if !nearest_first && let Some(page) = keyed_page(conn, r, kind, after, limit)? {
+        return Ok(page);
+    }
     let mut reach = if nearest_first {
         (after.map_or(0.0, |(key, _)| key.max(0.0)) + FIRST_REACH_M).min(r.radius_m)
     } else {
@@ -534,14 +575,185 @@ fn group_page(
     }
 }
 
+/// Largest safe radius first: one cell's records in the order's index, from the cursor's key
+/// on (`?3`), with the search's filters (`?4` minimum radius, `?5` age cut-off).
+const BY_RADIUS_SQL: &str = "SELECT /* cursor */ id, latitude_deg, longitude_deg, safe_radius_m, \
+    last_confirmed_ms FROM sites INDEXED BY sites_by_radius WHERE kind = ?1 AND cell = ?2 \
+    AND safe_radius_m <= ?3 AND safe_radius_m >= ?4 AND last_confirmed_ms >= ?5 \
+    ORDER BY safe_radius_m DESC, id";
+
+/// Freshest first: as [`BY_RADIUS_SQL`], by last confirmation.
+const BY_FRESHNESS_SQL: &str = "SELECT /* cursor */ id, latitude_deg, longitude_deg, safe_radius_m, \
+    last_confirmed_ms FROM sites INDEXED BY sites_by_freshness WHERE kind = ?1 AND cell = ?2 \
+    AND last_confirmed_ms <= ?3 AND safe_radius_m >= ?4 AND last_confirmed_ms >= ?5 \
+    ORDER BY last_confirmed_ms DESC, id";
+
+/// [`BY_RADIUS_SQL`] and [`BY_FRESHNESS_SQL`] once per cursor a search may hold, told apart by
+/// a comment: the statement cache keeps one statement per text, and a search needs its cursors
+/// prepared side by side (preparing them anew each search cost more than the search).
+static CURSOR_SQL: LazyLock<[Vec<String>; 2]> = LazyLock::new(|| {
+    [BY_RADIUS_SQL, BY_FRESHNESS_SQL].map(|sql| {
+        (0..MAX_CELLS)
+            .map(|i| sql.replace("/* cursor */", &format!("/* cursor {i} */")))
+            .collect()
+    })
+});
+
+/// A keyed order's page by the grid: a cursor per cell under the circle's box, each yielding its
+/// admitted records in (key, id) order, merged by a heap until the page is full. Exact: every
+/// record the page leaves out ranks after the cursor it sits behind, which ranks after the
+/// page's last. `None` when the circle is narrower than [`GRID_MIN_RADIUS_M`] or needs more
+/// than [`MAX_CELLS`] cells.
+fn keyed_page(
+    conn: &Connection,
+    r: &Resolved,
+    kind: SiteKind,
+    after: Option<(f64, i64)>,
+    limit: usize,
+) -> Result<Option<Vec<Found>>> {
+    if r.radius_m < GRID_MIN_RADIUS_M {
+        return Ok(None);
+    }
+    let bbox = Bbox::around(r.center, r.radius_m).padded_m(BOX_PAD_M);
+    let Some(cells) = cells::covering(&bbox, MAX_CELLS) else {
+        return Ok(None);
+    };
+    // The cursor's key as a bound on the indexed column (the exact keyset test is in Rust).
+    let (sqls, bound) = match r.order {
+        Order::SafeRadius => (
+            &CURSOR_SQL[0],
+            rusqlite::types::Value::Real(after.map_or(f64::MAX, |(key, _)| -key)),
+        ),
+        _ => (
+            &CURSOR_SQL[1],
+            rusqlite::types::Value::Integer(
+                after.map_or(i64::MAX, |(key, _)| (-key).ceil() as i64),
+            ),
+        ),
+    };
+    let mut statements = Vec::with_capacity(cells.len());
+    for sql in &sqls[..cells.len()] {
+        statements.push(conn.prepare_cached(sql).map_err(db)?);
+    }
+    let mut cursors = Vec::with_capacity(cells.len());
+    for (stmt, cell) in statements.iter_mut().zip(&cells) {
+        let rows = stmt
+            .query(params![
+                kind_code(kind),
+                cell,
+                bound,
+                r.min_safe_radius_m,
+                cutoff_ms(r, kind)
+            ])
+            .map_err(db)?;
+        cursors.push(rows);
+    }
+    let mut heads = BinaryHeap::with_capacity(cursors.len());
+    for (i, rows) in cursors.iter_mut().enumerate() {
+        if let Some(head) = next_head(rows, i, r, kind)? {
+            heads.push(Reverse(head));
+        }
+    }
+    // Records are tested as they leave the heap, in the order's order: a cell that the circle
+    // barely meets is read only as far as the page's last key, not until it yields a record
+    // inside the circle.
+    let mut page = Vec::with_capacity(limit);
+    while page.len() < limit {
+        let Some(Reverse(head)) = heads.pop() else {
+            break;
+        };
+        if let Some(next) = next_head(&mut cursors[head.cursor], head.cursor, r, kind)? {
+            heads.push(Reverse(next));
+        }
+        let (key, id) = (head.key, head.id);
+        let later = after.is_none_or(|(ak, aid)| key.total_cmp(&ak).then(id.cmp(&aid)).is_gt());
+        if later && r.admits(&head.found.site, head.found.distance_m) {
+            page.push(head.found);
+        }
+    }
+    Ok(Some(page))
+}
+
+/// A cell cursor's next record, with its place in the order.
+fn next_head(
+    rows: &mut Rows<'_>,
+    cursor: usize,
+    r: &Resolved,
+    kind: SiteKind,
+) -> Result<Option<Head>> {
+    let Some(row) = rows.next().map_err(db)? else {
+        return Ok(None);
+    };
+    let site = indexed_site(row, kind).map_err(db)?;
+    let distance_m = distance_m(r.center, site.center);
+    Ok(Some(Head {
+        key: r.sort_key(&site, distance_m),
+        id: site.id.0,
+        cursor,
+        found: Found { site, distance_m },
+    }))
+}
+
+/// A cell cursor's next record, ordered by (key, id) for the merge.
+struct Head {
+    key: f64,
+    id: i64,
+    cursor: usize,
+    found: Found,
+}
+
+impl Ord for Head {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.key.total_cmp(&other.key).then(self.id.cmp(&other.id))
+    }
+}
+
+impl PartialOrd for Head {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl PartialEq for Head {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == Ordering::Equal
+    }
+}
+
+impl Eq for Head {}
+
+/// Confirmed sites older than the search's cut-off are left out; candidates have no age.
+fn cutoff_ms(r: &Resolved, kind: SiteKind) -> i64 {
+    match kind {
+        SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
+        SiteKind::Candidate => i64::MIN,
+    }
+}
+
+/// A record as an index holds it: (id, latitude, longitude, safe radius, last confirmation).
+fn indexed_site(row: &Row<'_>, kind: SiteKind) -> rusqlite::Result<Site> {
+    Ok(Site {
+        id: SiteId(row.get(0)?),
+        kind,
+        polygon: Polygon::default(),
+        center: LatLon::new(row.get(1)?, row.get(2)?),
+        safe_radius_m: row.get(3)?,
+        plane_height_m: 0.0,
+        area_m2: 0.0,
+        first_seen: Timestamp::default(),
+        last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
+        frames: 0,
+        approaches: 0,
+        drone_id: String::new(),
+        approach_id: String::new(),
+        model_id: String::new(),
+        source_id: None,
+    })
+}
+
 /// The sites of `kind` within `reach` of the search's centre that the search admits, as the
 /// R*Tree's auxiliary columns hold them (id, centre, radius, last confirmation).
 fn in_reach(conn: &Connection, r: &Resolved, kind: SiteKind, reach: f64) -> Result<Vec<Found>> {
-    // Candidates have no age; confirmed sites older than the cut-off are left out here.
-    let cutoff = match kind {
-        SiteKind::Confirmed => r.cutoff.map_or(i64::MIN, Timestamp::unix_ms),
-        SiteKind::Candidate => i64::MIN,
-    };
     let mut stmt = conn
         .prepare_cached(
             "SELECT id, latitude_deg, longitude_deg, safe_radius_m, last_confirmed_ms \
@@ -560,27 +772,9 @@ fn in_reach(conn: &Connection, r: &Resolved, kind: SiteKind, reach: f64) -> Resu
                 bbox.max_lon,
                 kind_code(kind),
                 r.min_safe_radius_m,
-                cutoff
+                cutoff_ms(r, kind)
             ],
-            |row| {
-                Ok(Site {
-                    id: SiteId(row.get(0)?),
-                    kind,
-                    polygon: Polygon::default(),
-                    center: LatLon::new(row.get(1)?, row.get(2)?),
-                    safe_radius_m: row.get(3)?,
-                    plane_height_m: 0.0,
-                    area_m2: 0.0,
-                    first_seen: Timestamp::default(),
-                    last_confirmed: Timestamp::from_unix_ms(row.get(4)?),
-                    frames: 0,
-                    approaches: 0,
-                    drone_id: String::new(),
-                    approach_id: String::new(),
-                    model_id: String::new(),
-                    source_id: None,
-                })
-            },
+            |row| indexed_site(row, kind),
         )
         .map_err(db)?;
     let mut found = Vec::new();

@@ -133,6 +133,61 @@ mod scene {
         }
     }
 
+    /// Pages through `q` to its end and checks the concatenated pages against brute force over
+    /// `records` (every record, filtered and ordered by the documented rules), and every
+    /// reported distance. Returns how many results and pages there were.
+    pub fn paged_like_brute_force(
+        store: &dyn Store,
+        records: &[Found],
+        mut q: SearchQuery,
+        now: Timestamp,
+        case: usize,
+    ) -> (usize, usize) {
+        let cutoff = q.max_age.map(|a| now.saturating_sub(a));
+        let mut want: Vec<(u8, f64, i64)> = records
+            .iter()
+            .filter_map(|f| {
+                let s = &f.site;
+                let d = landing_catalog::distance_m(q.center, s.center);
+                let confirmed = s.kind == SiteKind::Confirmed;
+                let keep = d <= q.radius_m
+                    && s.safe_radius_m >= q.min_safe_radius_m
+                    && (confirmed || q.include_candidates)
+                    && (!confirmed || cutoff.is_none_or(|c| s.last_confirmed >= c));
+                let key = match (q.order, confirmed) {
+                    (Order::Distance, _) | (Order::Freshness, false) => d,
+                    (Order::SafeRadius, _) => -s.safe_radius_m,
+                    (Order::Freshness, true) => -(s.last_confirmed.unix_ms() as f64),
+                };
+                keep.then_some((u8::from(!confirmed), key, s.id.0))
+            })
+            .collect();
+        want.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
+        let want: Vec<i64> = want.into_iter().map(|w| w.2).collect();
+        let (mut got, mut pages) = (Vec::new(), 0);
+        let first = q.clone();
+        for _ in 0..1000 {
+            let page = store.search(&q, now).unwrap();
+            assert!(page.sites.len() <= q.page_size as usize);
+            for f in &page.sites {
+                let d = landing_catalog::distance_m(q.center, f.site.center);
+                assert!(
+                    (f.distance_m - d).abs() < 0.01,
+                    "distance {} against {d}",
+                    f.distance_m
+                );
+            }
+            got.extend(page.sites.iter().map(|f| f.site.id.0));
+            pages += 1;
+            if page.next_page_token.is_empty() {
+                break;
+            }
+            q.page_token = page.next_page_token;
+        }
+        assert_eq!(got, want, "case {case}: {first:?}");
+        (got.len(), pages)
+    }
+
     pub fn field_of(e: Error) -> String {
         e.field()
             .unwrap_or_else(|| panic!("not a field error: {e}"))
@@ -905,6 +960,138 @@ mod suite {
         store.check_integrity().unwrap();
     }
 
+    /// Largest radius first and freshest first where ties are the rule: few distinct radii and
+    /// times, records stacked on one point, on cell corners and on the circle's edge, candidates
+    /// among them; narrow, middling and wide circles, small pages (a page often ends inside a
+    /// run of equal keys), age and radius filters. Every search pages to its end like brute
+    /// force.
+    pub fn keyed_orders_with_ties_match_brute_force(b: &dyn Backend) {
+        let store = b.open();
+        let mut rng = Lcg(0x5eed_0002);
+        let radii = [1.0, 2.5, 4.0, 4.0, 7.5];
+        let mut places: Vec<LatLon> = (0..500)
+            .map(|_| at(rng.range(-2000.0, 2000.0), rng.range(-2000.0, 2000.0)))
+            .collect();
+        // Twelve records on one point; records on the corners of the stores' grid cells (any
+        // grid of 1/400°, 1/200°, ... has corners there); records just inside and just outside
+        // a 700 m circle around the origin.
+        places.extend(std::iter::repeat_n(at(300.0, -200.0), 12));
+        let corner = |k: f64| {
+            LatLon::new(
+                (ORIGIN.latitude_deg * 400.0).round() / 400.0 + k / 400.0,
+                (ORIGIN.longitude_deg * 400.0).round() / 400.0 - k / 400.0,
+            )
+        };
+        places.extend((-3..=3).map(|k| corner(f64::from(k))));
+        // (Angles irregular: two points equally far by symmetry are a tie that each store's
+        // floating-point distance breaks its own way, and nearest first orders by distance.)
+        for i in 0..16 {
+            let a = f64::from(i) * std::f64::consts::TAU / 16.0 + 0.013 * f64::from(i * i);
+            let d = if i % 2 == 0 { 699.5 } else { 700.5 };
+            places.push(at(d * a.cos(), d * a.sin()));
+        }
+        let sites: Vec<Site> = places
+            .iter()
+            .enumerate()
+            .map(|(i, &center)| {
+                let r = radii[(rng.next() % radii.len() as u64) as usize];
+                let confirmed = t(60 * (rng.next() % 6) as i64);
+                let candidate = i % 9 == 4;
+                Site {
+                    id: SiteId(0),
+                    kind: if candidate {
+                        SiteKind::Candidate
+                    } else {
+                        SiteKind::Confirmed
+                    },
+                    polygon: Polygon::rectangle(
+                        LatLon::new(center.latitude_deg - 1e-4, center.longitude_deg - 1e-4),
+                        LatLon::new(center.latitude_deg + 1e-4, center.longitude_deg + 1e-4),
+                    ),
+                    center,
+                    safe_radius_m: r,
+                    plane_height_m: 10.0,
+                    area_m2: 100.0,
+                    first_seen: t(0),
+                    last_confirmed: confirmed,
+                    frames: 1,
+                    approaches: 1,
+                    drone_id: "d".into(),
+                    approach_id: "a".into(),
+                    model_id: "m".into(),
+                    source_id: candidate.then(|| format!("b{i}")),
+                }
+            })
+            .collect();
+        store.load_sites(&sites).unwrap();
+        let records = everything(&*store);
+        assert_eq!(records.len(), sites.len());
+        let now = t(400);
+        let (mut results, mut pages) = (0, 0);
+        let widths = [100.0, 150.0, 700.0, 1300.0, 3000.0];
+        for case in 0..60 {
+            let center = match case % 4 {
+                0 => ORIGIN,
+                1 => at(300.0, -200.0),
+                _ => at(rng.range(-1500.0, 1500.0), rng.range(-1500.0, 1500.0)),
+            };
+            let mut q = SearchQuery::new(center, widths[case % widths.len()]);
+            q.order = [Order::SafeRadius, Order::Freshness, Order::Distance][case % 3];
+            q.include_candidates = case % 2 == 1;
+            q.min_safe_radius_m = [0.0, 2.5, 3.0][case % 7 % 3];
+            q.max_age = match case % 4 {
+                0 => None,
+                1 => Some(Duration::from_secs(150)),
+                _ => Some(Duration::from_secs(86_400)),
+            };
+            q.page_size = [1, 3, 7, 20][case % 4];
+            let (got, n) = paged_like_brute_force(&*store, &records, q, now, case);
+            results += got;
+            pages += n;
+        }
+        assert!(
+            results > 2000 && pages > 500,
+            "{results} results on {pages} pages"
+        );
+    }
+
+    /// A keyed search finds an updated site where it now is, with its new radius and time, once:
+    /// the update moves it 13 m north across a line of the grid (the stores index it anew), and
+    /// the search's circle reaches the new place but not the old one's cells.
+    pub fn keyed_orders_follow_updates(b: &dyn Backend) {
+        let store = b.open();
+        let line = (ORIGIN.latitude_deg * 400.0).ceil() / 400.0;
+        let north = |m: f64| LatLon::new(line + m / 111_195.0, ORIGIN.longitude_deg);
+        let roof = |p: LatLon, r: f64| ObservedSite {
+            polygon: Polygon::rectangle(
+                LatLon::new(p.latitude_deg - 1e-4, p.longitude_deg - 1e-4),
+                LatLon::new(p.latitude_deg + 1e-4, p.longitude_deg + 1e-4),
+            ),
+            center: p,
+            safe_radius_m: r,
+            plane_height_m: 10.0,
+            frames: 1,
+        };
+        store
+            .apply(&[obs(10, "a", vec![], vec![roof(north(-3.0), 8.0)])])
+            .unwrap();
+        store
+            .apply(&[obs(20, "b", vec![], vec![roof(north(10.0), 9.0)])])
+            .unwrap();
+        let all = everything(&*store);
+        assert_eq!(all.len(), 1, "the same roof, updated");
+        assert_eq!(all[0].site.last_confirmed, t(20));
+        let far = LocalFrame::new(north(10.0)).to_lat_lon((0.0, 200.0));
+        for order in [Order::SafeRadius, Order::Freshness] {
+            let mut q = SearchQuery::new(far, 201.0);
+            q.order = order;
+            let page = store.search(&q, t(30)).unwrap();
+            assert_eq!(page.sites.len(), 1, "{order:?}");
+            assert_eq!(page.sites[0].site.safe_radius_m, 9.0);
+            assert_eq!(page.sites[0].site.last_confirmed, t(20));
+        }
+    }
+
     pub fn random_searches_match_brute_force(b: &dyn Backend) {
         let store = b.open();
         let mut rng = Lcg(0x5eed_0001);
@@ -961,49 +1148,9 @@ mod suite {
                 _ => Some(Duration::from_secs(86_400)),
             };
             q.page_size = 1 + (rng.next() % 40) as i32;
-            // Brute force: every record, filtered and ordered by the documented rules.
-            let cutoff = q.max_age.map(|a| now.saturating_sub(a));
-            let mut want: Vec<(u8, f64, i64)> = records
-                .iter()
-                .filter_map(|f| {
-                    let s = &f.site;
-                    let d = landing_catalog::distance_m(q.center, s.center);
-                    let confirmed = s.kind == SiteKind::Confirmed;
-                    let keep = d <= q.radius_m
-                        && s.safe_radius_m >= q.min_safe_radius_m
-                        && (confirmed || q.include_candidates)
-                        && (!confirmed || cutoff.is_none_or(|c| s.last_confirmed >= c));
-                    let key = match (q.order, confirmed) {
-                        (Order::Distance, _) | (Order::Freshness, false) => d,
-                        (Order::SafeRadius, _) => -s.safe_radius_m,
-                        (Order::Freshness, true) => -(s.last_confirmed.unix_ms() as f64),
-                    };
-                    keep.then_some((u8::from(!confirmed), key, s.id.0))
-                })
-                .collect();
-            want.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2)));
-            let want: Vec<i64> = want.into_iter().map(|w| w.2).collect();
-            let mut got = Vec::new();
-            for _ in 0..1000 {
-                let page = store.search(&q, now).unwrap();
-                assert!(page.sites.len() <= q.page_size as usize);
-                for f in &page.sites {
-                    let d = landing_catalog::distance_m(q.center, f.site.center);
-                    assert!(
-                        (f.distance_m - d).abs() < 0.01,
-                        "distance {} against {d}",
-                        f.distance_m
-                    );
-                }
-                got.extend(page.sites.iter().map(|f| f.site.id.0));
-                pages += 1;
-                if page.next_page_token.is_empty() {
-                    break;
-                }
-                q.page_token = page.next_page_token;
-            }
-            assert_eq!(got, want, "case {case}: {q:?}");
-            results += got.len();
+            let (got, n) = paged_like_brute_force(&*store, &records, q, now, case);
+            results += got;
+            pages += n;
         }
         // The cases are not vacuous: many results, most searches over several pages.
         assert!(
@@ -1086,6 +1233,14 @@ macro_rules! conformance {
             fn random_searches_match_brute_force() {
                 suite::random_searches_match_brute_force(&$backend);
             }
+            #[test]
+            fn keyed_orders_with_ties_match_brute_force() {
+                suite::keyed_orders_with_ties_match_brute_force(&$backend);
+            }
+            #[test]
+            fn keyed_orders_follow_updates() {
+                suite::keyed_orders_follow_updates(&$backend);
+            }
         }
     };
 }
@@ -1103,7 +1258,7 @@ mod specific {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("catalog.sqlite");
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 2);
+        assert_eq!(store.schema_version().unwrap(), 3);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
@@ -1165,7 +1320,7 @@ mod specific {
         .unwrap();
         drop(raw);
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 2);
+        assert_eq!(store.schema_version().unwrap(), 3);
         store.check_integrity().unwrap();
         let page = store
             .search(&SearchQuery::new(ORIGIN, 100.0), t(20))
@@ -1173,6 +1328,100 @@ mod specific {
         assert_eq!(page.sites.len(), 1);
         assert_eq!(page.sites[0].site.id.0, 7);
         assert_eq!(page.sites[0].site.safe_radius_m, 3.0);
+    }
+
+    /// Records for the migration tests: spread over a few of the grid's cells (west of
+    /// Greenwich and north of the equator, so a wrong floor shows), radii and times varied.
+    fn spread_sites() -> Vec<Site> {
+        let mut rng = Lcg(0x5eed_0003);
+        (0..200)
+            .map(|i| {
+                let center = at(rng.range(-900.0, 900.0), rng.range(-900.0, 900.0));
+                Site {
+                    id: SiteId(0),
+                    kind: SiteKind::Confirmed,
+                    polygon: Polygon::rectangle(
+                        LatLon::new(center.latitude_deg - 1e-4, center.longitude_deg - 1e-4),
+                        LatLon::new(center.latitude_deg + 1e-4, center.longitude_deg + 1e-4),
+                    ),
+                    center,
+                    safe_radius_m: rng.range(1.0, 15.0),
+                    plane_height_m: 10.0,
+                    area_m2: 100.0,
+                    first_seen: t(0),
+                    last_confirmed: t(i64::from(i % 50)),
+                    frames: 1,
+                    approaches: 1,
+                    drone_id: "d".into(),
+                    approach_id: "a".into(),
+                    model_id: "m".into(),
+                    source_id: None,
+                }
+            })
+            .collect()
+    }
+
+    /// Both keyed orders over a migrated store page like brute force.
+    fn keyed_orders_answer(store: &dyn Store) {
+        let records = everything(store);
+        assert_eq!(records.len(), 200);
+        for (case, order) in [Order::SafeRadius, Order::Freshness]
+            .into_iter()
+            .enumerate()
+        {
+            let mut q = SearchQuery::new(at(100.0, -50.0), 600.0);
+            q.order = order;
+            q.page_size = 9;
+            let (got, pages) = paged_like_brute_force(store, &records, q, t(60), case);
+            assert!(got > 50 && pages > 5, "{got} results on {pages} pages");
+        }
+    }
+
+    /// A file written at schema version 2 (no grid cells, no keyed indexes) is migrated on open:
+    /// every site gets its cell, and the keyed orders answer as brute force.
+    #[test]
+    fn sqlite_version_2_file_is_migrated() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("catalog.sqlite");
+        SqliteStore::open(&path)
+            .unwrap()
+            .load_sites(&spread_sites())
+            .unwrap();
+        // Back to version 2 as that build wrote it.
+        let raw = rusqlite::Connection::open(&path).unwrap();
+        raw.execute_batch(
+            "DROP INDEX sites_by_radius; DROP INDEX sites_by_freshness;
+             ALTER TABLE sites DROP COLUMN cell; DELETE FROM schema_version WHERE version = 3;",
+        )
+        .unwrap();
+        drop(raw);
+        let store = SqliteStore::open(&path).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 3);
+        store.check_integrity().unwrap();
+        keyed_orders_answer(&store);
+    }
+
+    /// A database at schema version 1 (no `btree_gist`, no keyed indexes) is migrated at connect.
+    #[test]
+    fn postgis_version_1_schema_is_migrated() {
+        let server = pg::shared();
+        let url = server.create_database();
+        PostgisStore::connect(&url)
+            .unwrap()
+            .load_sites(&spread_sites())
+            .unwrap();
+        let mut raw = postgres::Client::connect(&url, postgres::NoTls).unwrap();
+        raw.batch_execute(
+            "DROP INDEX catalog_sites_keys; DROP INDEX catalog_sites_radius;
+             DROP EXTENSION btree_gist;
+             DELETE FROM catalog_schema_version WHERE version = 2;",
+        )
+        .unwrap();
+        drop(raw);
+        let store = PostgisStore::connect(&url).unwrap();
+        assert_eq!(store.schema_version().unwrap(), 2);
+        store.check_integrity().unwrap();
+        keyed_orders_answer(&store);
     }
 
     #[test]
@@ -1194,7 +1443,7 @@ mod specific {
         let server = pg::shared();
         let url = server.create_database();
         let store = PostgisStore::connect(&url).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 1);
+        assert_eq!(store.schema_version().unwrap(), 2);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
