@@ -20,7 +20,8 @@ pub(crate) trait WriteTx {
     fn insert(&mut self, site: &Site) -> Result<SiteId>;
     fn update(&mut self, site: &Site) -> Result<()>;
     fn delete(&mut self, id: SiteId) -> Result<()>;
-    fn record_seen(&mut self, t: Timestamp, area: &Polygon) -> Result<()>;
+    /// Records what one observation saw (a few hundred rectangles: one statement where it can).
+    fn record_seen(&mut self, t: Timestamp, areas: &[Polygon]) -> Result<()>;
 }
 
 /// Validates the whole batch, then applies it oldest first.
@@ -53,8 +54,8 @@ pub(crate) fn apply_sorted(tx: &mut impl WriteTx, sorted: &[&Observation]) -> Re
         for s in &p.inserts {
             tx.insert(s)?;
         }
-        for area in &obs.seen {
-            tx.record_seen(obs.t, area)?;
+        if !obs.seen.is_empty() {
+            tx.record_seen(obs.t, &obs.seen)?;
         }
         report += p.report;
     }

@@ -648,19 +648,28 @@ impl WriteTx for PgTx<'_, '_> {
         Ok(())
     }
 
-    fn record_seen(&mut self, t: Timestamp, area: &Polygon) -> Result<()> {
-        let b = area.bbox();
+    fn record_seen(&mut self, t: Timestamp, areas: &[Polygon]) -> Result<()> {
+        // One statement for the observation's few hundred rectangles: a round trip each cost
+        // 0.3-0.8 s per batch of four observations on a loaded box.
+        let boxes: Vec<_> = areas.iter().map(Polygon::bbox).collect();
+        let column = |f: fn(&Bbox) -> f64| boxes.iter().map(f).collect::<Vec<f64>>();
+        let geometries: Vec<String> = areas
+            .iter()
+            .map(|a| polygon_geometry(a, false).to_string())
+            .collect();
         self.tx
             .execute(
-                "INSERT INTO catalog_seen (observed_ms, area, bbox) VALUES ($1, \
-                 ST_GeomFromGeoJSON($2)::geography, ST_MakeEnvelope($3, $4, $5, $6, 4326))",
+                "INSERT INTO catalog_seen (observed_ms, area, bbox) \
+                 SELECT $1, ST_GeomFromGeoJSON(g)::geography, ST_MakeEnvelope(x0, y0, x1, y1, 4326) \
+                 FROM unnest($2::text[], $3::float8[], $4::float8[], $5::float8[], $6::float8[]) \
+                 AS u(g, x0, y0, x1, y1)",
                 &[
                     &t.unix_ms(),
-                    &polygon_geometry(area, false).to_string(),
-                    &b.min_lon,
-                    &b.min_lat,
-                    &b.max_lon,
-                    &b.max_lat,
+                    &geometries,
+                    &column(|b| b.min_lon),
+                    &column(|b| b.min_lat),
+                    &column(|b| b.max_lon),
+                    &column(|b| b.max_lat),
                 ],
             )
             .map_err(db)?;

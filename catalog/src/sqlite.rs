@@ -80,8 +80,9 @@ pub const BUSY_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The migrations, in order: the schema is at version `MIGRATIONS.len()`. Version 2 rebuilds the
 /// sites' R*Tree with auxiliary columns, version 3 numbers every site's grid cell (by
-/// `cells::cell_sql!`) and builds the two keyed indexes: opening an older
-/// file of a million sites takes some seconds once.
+/// `cells::cell_sql!`) and builds the two keyed indexes, version 4 rebuilds the sites table with
+/// `AUTOINCREMENT` ids (a withdrawn site's id is never given to another: a client that holds an
+/// id means one site): opening an older file of a million sites takes some seconds once.
 const MIGRATIONS: &[&str] = &[
     r#"
 CREATE TABLE sites (
@@ -132,6 +133,40 @@ CREATE INDEX sites_by_freshness ON sites (kind, cell, last_confirmed_ms DESC, id
     longitude_deg, safe_radius_m);
 "
     ),
+    r#"
+CREATE TABLE sites_v4 (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    kind INTEGER NOT NULL CHECK (kind IN (0, 1)),
+    polygon TEXT NOT NULL,
+    latitude_deg REAL NOT NULL,
+    longitude_deg REAL NOT NULL,
+    safe_radius_m REAL NOT NULL,
+    plane_height_m REAL NOT NULL,
+    area_m2 REAL NOT NULL,
+    first_seen_ms INTEGER NOT NULL,
+    last_confirmed_ms INTEGER NOT NULL,
+    frames INTEGER NOT NULL,
+    approaches INTEGER NOT NULL,
+    drone_id TEXT NOT NULL,
+    approach_id TEXT NOT NULL,
+    model_id TEXT NOT NULL,
+    source_id TEXT UNIQUE,
+    cell INTEGER NOT NULL DEFAULT 0
+);
+INSERT INTO sites_v4 (id, kind, polygon, latitude_deg, longitude_deg, safe_radius_m,
+    plane_height_m, area_m2, first_seen_ms, last_confirmed_ms, frames, approaches, drone_id,
+    approach_id, model_id, source_id, cell)
+    SELECT id, kind, polygon, latitude_deg, longitude_deg, safe_radius_m, plane_height_m, area_m2,
+    first_seen_ms, last_confirmed_ms, frames, approaches, drone_id, approach_id, model_id,
+    source_id, cell FROM sites;
+DROP TABLE sites;
+ALTER TABLE sites_v4 RENAME TO sites;
+CREATE INDEX sites_kind_last_confirmed ON sites (kind, last_confirmed_ms);
+CREATE INDEX sites_by_radius ON sites (kind, cell, safe_radius_m DESC, id, latitude_deg,
+    longitude_deg, last_confirmed_ms);
+CREATE INDEX sites_by_freshness ON sites (kind, cell, last_confirmed_ms DESC, id, latitude_deg,
+    longitude_deg, safe_radius_m);
+"#,
 ];
 
 const SITE_COLUMNS: &str = "s.id, s.kind, s.polygon, s.latitude_deg, s.longitude_deg, \
@@ -490,17 +525,20 @@ impl WriteTx for SqliteTx<'_> {
         Ok(())
     }
 
-    fn record_seen(&mut self, t: Timestamp, area: &Polygon) -> Result<()> {
-        self.tx
-            .prepare_cached("INSERT INTO seen (observed_ms, polygon) VALUES (?1, ?2)")
-            .map_err(db)?
-            .execute(params![
-                t.unix_ms(),
-                polygon_geometry(area, false).to_string()
-            ])
-            .map_err(db)?;
-        let id = self.tx.last_insert_rowid();
-        self.index("seen_rtree", id, &area.bbox())
+    fn record_seen(&mut self, t: Timestamp, areas: &[Polygon]) -> Result<()> {
+        for area in areas {
+            self.tx
+                .prepare_cached("INSERT INTO seen (observed_ms, polygon) VALUES (?1, ?2)")
+                .map_err(db)?
+                .execute(params![
+                    t.unix_ms(),
+                    polygon_geometry(area, false).to_string()
+                ])
+                .map_err(db)?;
+            let id = self.tx.last_insert_rowid();
+            self.index("seen_rtree", id, &area.bbox())?;
+        }
+        Ok(())
     }
 }
 

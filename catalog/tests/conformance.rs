@@ -600,6 +600,30 @@ mod suite {
         assert_eq!(left, [(60, t(20), 10.6), (90, t(10), 10.0)]);
     }
 
+    /// A client that holds a site's id means that site: an id is never given to another, even
+    /// when the site that had it (the newest) was withdrawn.
+    pub fn withdrawn_ids_are_not_reused(b: &dyn Backend) {
+        let store = b.open();
+        let roof = square(0.0, 0.0, 15.0);
+        store
+            .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 5.0, 10.0)])])
+            .unwrap();
+        let first = everything(&*store)[0].site.id;
+        let r = store
+            .apply(&[obs(20, "b", vec![roof.clone()], vec![])])
+            .unwrap();
+        assert_eq!(r.withdrawn, 1);
+        store
+            .apply(&[obs(30, "c", vec![], vec![site(0.0, 0.0, 5.0, 10.0)])])
+            .unwrap();
+        let again = everything(&*store);
+        assert_eq!(again.len(), 1);
+        assert_ne!(
+            again[0].site.id, first,
+            "a withdrawn site's id was given again"
+        );
+    }
+
     pub fn older_observations_never_overwrite(b: &dyn Backend) {
         let store = b.open();
         let roof = square(0.0, 0.0, 15.0);
@@ -1202,6 +1226,10 @@ macro_rules! conformance {
                 suite::blocked_sites_are_withdrawn(&$backend);
             }
             #[test]
+            fn withdrawn_ids_are_not_reused() {
+                suite::withdrawn_ids_are_not_reused(&$backend);
+            }
+            #[test]
             fn older_observations_never_overwrite() {
                 suite::older_observations_never_overwrite(&$backend);
             }
@@ -1258,7 +1286,7 @@ mod specific {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("catalog.sqlite");
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 3);
+        assert_eq!(store.schema_version().unwrap(), 4);
         store
             .apply(&[obs(10, "a", vec![], vec![site(0.0, 0.0, 3.0, 10.0)])])
             .unwrap();
@@ -1320,7 +1348,7 @@ mod specific {
         .unwrap();
         drop(raw);
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 3);
+        assert_eq!(store.schema_version().unwrap(), 4);
         store.check_integrity().unwrap();
         let page = store
             .search(&SearchQuery::new(ORIGIN, 100.0), t(20))
@@ -1387,16 +1415,16 @@ mod specific {
             .unwrap()
             .load_sites(&spread_sites())
             .unwrap();
-        // Back to version 2 as that build wrote it.
+        // Back to version 2's columns and indexes (the ids aside: version 4 made them AUTOINCREMENT).
         let raw = rusqlite::Connection::open(&path).unwrap();
         raw.execute_batch(
             "DROP INDEX sites_by_radius; DROP INDEX sites_by_freshness;
-             ALTER TABLE sites DROP COLUMN cell; DELETE FROM schema_version WHERE version = 3;",
+             ALTER TABLE sites DROP COLUMN cell; DELETE FROM schema_version WHERE version >= 3;",
         )
         .unwrap();
         drop(raw);
         let store = SqliteStore::open(&path).unwrap();
-        assert_eq!(store.schema_version().unwrap(), 3);
+        assert_eq!(store.schema_version().unwrap(), 4);
         store.check_integrity().unwrap();
         keyed_orders_answer(&store);
     }
