@@ -42,90 +42,20 @@ fn triangulate_deferring(
             reason: "at most 2^32 - 2 points",
         });
     }
-    let xy = |i: usize| [points[i][0], points[i][1]];
-
-    // Seed: the point nearest the bounding-box centre, its nearest neighbour, and the point that
-    // makes the smallest circumcircle with them (then no point lies inside that circle).
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in points {
-        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
-        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
-    }
-    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
-    let nearest = |to: [f64; 2], skip: usize| {
-        let mut best = (f64::INFINITY, EMPTY as usize);
-        for i in 0..n {
-            let d = dist2(xy(i), to);
-            if i != skip && d > 0.0 && d < best.0 {
-                best = (d, i);
-            }
-        }
-        best.1
+    let Some((seed, center)) = seed_triangle(points) else {
+        return Ok(Triangulation::default()); // all points coincide or lie on one line
     };
-    let i0 = {
-        let mut best = (f64::INFINITY, 0);
-        for i in 0..n {
-            let d = dist2(xy(i), mid);
-            if d < best.0 {
-                best = (d, i);
-            }
-        }
-        best.1
-    };
-    let i1 = nearest(xy(i0), i0);
-    if i1 == EMPTY as usize {
-        return Ok(Triangulation::default()); // all points coincide
-    }
-    let mut i2 = EMPTY as usize;
-    let mut best_r = f64::INFINITY;
-    for i in 0..n {
-        if i == i0 || i == i1 || orient(xy(i0), xy(i1), xy(i)) == 0.0 {
-            continue;
-        }
-        let r = circumradius2(xy(i0), xy(i1), xy(i));
-        if r < best_r || i2 == EMPTY as usize {
-            best_r = r;
-            i2 = i;
-        }
-    }
-    if i2 == EMPTY as usize {
-        return Ok(Triangulation::default()); // all points on one line
-    }
-    let (i1, i2) = if orient(xy(i0), xy(i1), xy(i2)) < 0.0 {
-        (i2, i1)
-    } else {
-        (i1, i2)
-    };
-    let center = circumcenter(xy(i0), xy(i1), xy(i2));
-    let center = if center[0].is_finite() && center[1].is_finite() {
-        center
-    } else {
-        mid
-    };
-
-    // Sweep order: distance from the seed circumcentre, ties by index (deterministic). The sweep
-    // then works on ranks in this order, over a copy of the coordinates in this order: points that
-    // meet in the sweep sit together in memory.
-    let mut order: Vec<(u64, u32)> = (0..n)
-        .map(|i| (dist2(xy(i), center).to_bits(), i as u32))
-        .collect();
-    order.sort_unstable();
-    let coords: Vec<[f64; 2]> = order.iter().map(|&(_, i)| xy(i as usize)).collect();
-    let rank_of = |i: usize| {
-        order
-            .iter()
-            .position(|&(_, j)| j as usize == i)
-            .unwrap_or(0) as u32
-    };
-    let (r0, r1, r2) = (rank_of(i0), rank_of(i1), rank_of(i2));
-
-    let mut b = Builder::new(&coords, center);
+    let sweep = Sweep::new(points, center, seed);
+    let [r0, r1, r2] = sweep.seed_ranks;
+    let coords = &sweep.coords;
+    let mut b = Builder::new(coords, center);
     b.seed(r0, r1, r2);
     let seeds = [
         coords[r0 as usize],
         coords[r1 as usize],
         coords[r2 as usize],
     ];
+    let order = &sweep.order;
     let mut deferred = Vec::new();
     let mut k = 0;
     while k < n {
@@ -156,17 +86,118 @@ fn triangulate_deferring(
     for r in deferred {
         b.add_inside(r)?;
     }
-    let mut triangles = b.triangles;
-    for v in &mut triangles {
-        *v = order[*v as usize].1;
+    Ok(b.finish(&sweep.order))
+}
+
+/// The seed triangle, counter-clockwise, and its circumcentre: the point nearest the
+/// bounding-box centre, its nearest neighbour, and the point that makes the smallest circumcircle
+/// with them (then no point lies inside that circle). `None` when all points coincide or lie on
+/// one line.
+fn seed_triangle(points: &[[f64; 3]]) -> Option<([usize; 3], [f64; 2])> {
+    let xy = |p: &[f64; 3]| [p[0], p[1]];
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in points {
+        lo = [lo[0].min(p[0]), lo[1].min(p[1])];
+        hi = [hi[0].max(p[0]), hi[1].max(p[1])];
     }
-    triangles.shrink_to_fit();
-    let mut halfedges = b.halfedges;
-    halfedges.shrink_to_fit();
-    Ok(Triangulation {
-        triangles,
-        halfedges,
-    })
+    let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+    let nearest = |to: [f64; 2], skip: usize| {
+        let mut best = (f64::INFINITY, EMPTY as usize);
+        for (i, p) in points.iter().enumerate() {
+            let d = dist2(xy(p), to);
+            if i != skip && d > 0.0 && d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    };
+    let i0 = {
+        let mut best = (f64::INFINITY, 0);
+        for (i, p) in points.iter().enumerate() {
+            let d = dist2(xy(p), mid);
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    };
+    let p0 = xy(&points[i0]);
+    let i1 = nearest(p0, i0);
+    if i1 == EMPTY as usize {
+        return None;
+    }
+    let p1 = xy(&points[i1]);
+    let mut i2 = EMPTY as usize;
+    let mut best_r = f64::INFINITY;
+    for (i, p) in points.iter().enumerate() {
+        if i == i0 || i == i1 {
+            continue;
+        }
+        // The exact collinearity test only for a point that would be taken: it is the costly one.
+        let r = circumradius2(p0, p1, xy(p));
+        if (r < best_r || i2 == EMPTY as usize) && orient(p0, p1, xy(p)) != 0.0 {
+            best_r = r;
+            i2 = i;
+        }
+    }
+    if i2 == EMPTY as usize {
+        return None;
+    }
+    let p2 = xy(&points[i2]);
+    let (i1, i2) = if orient(p0, p1, p2) < 0.0 {
+        (i2, i1)
+    } else {
+        (i1, i2)
+    };
+    let center = circumcenter(p0, xy(&points[i1]), xy(&points[i2]));
+    let center = if center[0].is_finite() && center[1].is_finite() {
+        center
+    } else {
+        mid
+    };
+    Some(([i0, i1, i2], center))
+}
+
+/// The sweep order: distance from the seed circumcentre, ties by index (deterministic). The sweep
+/// works on ranks in this order, over a copy of the coordinates in this order: points that meet in
+/// the sweep sit together in memory.
+struct Sweep {
+    /// (squared distance's bits, input index), sorted.
+    order: Vec<(u64, u32)>,
+    /// The x/y of `order`'s points, in that order.
+    coords: Vec<[f64; 2]>,
+    /// The ranks of the seed triangle's points.
+    seed_ranks: [u32; 3],
+}
+
+impl Sweep {
+    fn new(points: &[[f64; 3]], center: [f64; 2], seed: [usize; 3]) -> Self {
+        let mut order: Vec<(u64, u32)> = points
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (dist2([p[0], p[1]], center).to_bits(), i as u32))
+            .collect();
+        order.sort_unstable();
+        let mut seed_ranks = [0u32; 3];
+        let coords = order
+            .iter()
+            .enumerate()
+            .map(|(r, &(_, i))| {
+                for (s, rank) in seed.iter().zip(&mut seed_ranks) {
+                    if *s == i as usize {
+                        *rank = r as u32;
+                    }
+                }
+                let p = points[i as usize];
+                [p[0], p[1]]
+            })
+            .collect();
+        Self {
+            order,
+            coords,
+            seed_ranks,
+        }
+    }
 }
 
 #[inline]
@@ -273,6 +304,21 @@ impl<'a> Builder<'a> {
         }
     }
 
+    /// The triangulation in input indices (`order` maps ranks to them).
+    fn finish(self, order: &[(u64, u32)]) -> Triangulation {
+        let mut triangles = self.triangles;
+        for v in &mut triangles {
+            *v = order[*v as usize].1;
+        }
+        triangles.shrink_to_fit();
+        let mut halfedges = self.halfedges;
+        halfedges.shrink_to_fit();
+        Triangulation {
+            triangles,
+            halfedges,
+        }
+    }
+
     #[inline]
     fn xy(&self, i: u32) -> [f64; 2] {
         self.points[i as usize]
@@ -283,7 +329,10 @@ impl<'a> Builder<'a> {
         let q = dx / (dx.abs() + dy.abs());
         let a = if dy > 0.0 { 3.0 - q } else { 1.0 + q } / 4.0;
         let size = self.hash.len();
-        ((a * size as f64).floor() as usize) % size
+        // `a` is in [0, 1] (NaN for the centre itself), so truncation is the floor (NaN gives 0)
+        // and only a == 1 reaches `size`; no libm call, no integer division on the hot path.
+        let k = (a * size as f64) as usize;
+        if k < size { k } else { k % size }
     }
 
     fn seed(&mut self, i0: u32, i1: u32, i2: u32) {
@@ -323,7 +372,8 @@ impl<'a> Builder<'a> {
     /// nothing) if it does not.
     fn add_outside(&mut self, i: u32) -> Result<bool, GeometryError> {
         let p = self.xy(i);
-        let Some((mut e, start)) = self.first_visible_edge(p)? else {
+        let key = self.hash_key(p);
+        let Some((mut e, start)) = self.first_visible_edge(p, key)? else {
             return Ok(false);
         };
         let n0 = self.hull_next[e as usize];
@@ -341,8 +391,7 @@ impl<'a> Builder<'a> {
         self.hull_next[i as usize] = n;
         self.hull_next[e as usize] = i;
         self.hull_prev[n as usize] = i;
-        let k = self.hash_key(p);
-        self.hash[k] = i;
+        self.hash[key] = i;
         let k = self.hash_key(self.xy(e));
         self.hash[k] = e;
         Ok(true)
@@ -351,17 +400,12 @@ impl<'a> Builder<'a> {
     /// The first hull edge `e → next(e)` that sees `p`, walking from a hull point near `p` in
     /// the angular hash, and the hull point the walk started at; `None` when no edge sees it (the
     /// point is inside or on the hull).
-    fn first_visible_edge(&self, p: [f64; 2]) -> Result<Option<(u32, u32)>, GeometryError> {
-        let key = self.hash_key(p);
-        let size = self.hash.len();
-        let mut start = EMPTY;
-        for j in 0..size {
-            let s = self.hash[(key + j) % size];
-            if s != EMPTY && self.hull_next[s as usize] != s {
-                start = s;
-                break;
-            }
-        }
+    fn first_visible_edge(
+        &self,
+        p: [f64; 2],
+        key: usize,
+    ) -> Result<Option<(u32, u32)>, GeometryError> {
+        let mut start = self.hull_point_near(key);
         if start == EMPTY {
             return Err(GeometryError::InvalidMesh {
                 reason: "sweep hull lost its points".into(),
@@ -387,6 +431,23 @@ impl<'a> Builder<'a> {
                 });
             }
         }
+    }
+
+    /// The first point still on the hull in the angular hash from bucket `key` on, or [`EMPTY`].
+    fn hull_point_near(&self, key: usize) -> u32 {
+        let size = self.hash.len();
+        let mut k = key;
+        for _ in 0..size {
+            let s = self.hash[k];
+            if s != EMPTY && self.hull_next[s as usize] != s {
+                return s;
+            }
+            k += 1;
+            if k == size {
+                k = 0;
+            }
+        }
+        EMPTY
     }
 
     /// Adds the triangles of point `i` with the hull edges from `n` on that see it (`p`), and
@@ -440,16 +501,12 @@ impl<'a> Builder<'a> {
     fn add_inside(&mut self, i: u32) -> Result<(), GeometryError> {
         let p = self.xy(i);
         // Start from the hull edge nearest in angle: late points lie near the hull.
-        let key = self.hash_key(p);
-        let size = self.hash.len();
-        let mut start = 0u32;
-        for j in 0..size {
-            let s = self.hash[(key + j) % size];
-            if s != EMPTY && self.hull_next[s as usize] != s {
-                start = self.hull_tri[s as usize];
-                break;
-            }
-        }
+        let s = self.hull_point_near(self.hash_key(p));
+        let start = if s == EMPTY {
+            0
+        } else {
+            self.hull_tri[s as usize]
+        };
         let mut t = start as usize / 3;
         let limit = self.triangles.len() + 16;
         let mut steps = 0usize;
@@ -572,25 +629,33 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one.
+    /// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one. After
+    /// a flip the same half-edge is checked again (it has a new neighbour) before the one the flip
+    /// exposed on the other side, which waits on the stack: delaunator's order.
     fn legalize(&mut self, a: u32) -> Result<(), GeometryError> {
         self.stack.clear();
-        self.stack.push(a);
-        while let Some(a) = self.stack.pop() {
-            let a = a as usize;
+        let mut a = a as usize;
+        loop {
             let b = self.halfedges[a];
-            if b == EMPTY {
-                continue;
-            }
-            let b = b as usize;
             let (al, ar) = (next_halfedge(a), prev_halfedge(a));
-            let (bl, br) = (prev_halfedge(b), next_halfedge(b));
-            let p0 = self.triangles[ar];
-            let pr = self.triangles[a];
-            let pl = self.triangles[al];
-            let p1 = self.triangles[bl];
-            if incircle(self.xy(pr), self.xy(pl), self.xy(p0), self.xy(p1)) <= 0.0 {
-                continue;
+            let illegal = b != EMPTY && {
+                let bl = prev_halfedge(b as usize);
+                let [p0, pr, pl, p1] = [
+                    self.triangles[ar],
+                    self.triangles[a],
+                    self.triangles[al],
+                    self.triangles[bl],
+                ];
+                incircle(self.xy(pr), self.xy(pl), self.xy(p0), self.xy(p1)) > 0.0
+            };
+            if !illegal {
+                match self.stack.pop() {
+                    Some(next) => {
+                        a = next as usize;
+                        continue;
+                    }
+                    None => return Ok(()),
+                }
             }
             if self.flips_left == 0 {
                 return Err(GeometryError::IterationLimit {
@@ -599,6 +664,9 @@ impl<'a> Builder<'a> {
                 });
             }
             self.flips_left -= 1;
+            let b = b as usize;
+            let (bl, br) = (prev_halfedge(b), next_halfedge(b));
+            let (p0, p1) = (self.triangles[ar], self.triangles[bl]);
             self.triangles[a] = p1;
             self.triangles[b] = p0;
             let hbl = self.halfedges[bl];
@@ -613,9 +681,7 @@ impl<'a> Builder<'a> {
                 self.hull_tri[p0 as usize] = b as u32;
             }
             self.stack.push(br as u32);
-            self.stack.push(a as u32);
         }
-        Ok(())
     }
 }
 
