@@ -279,6 +279,8 @@ struct Builder<'a> {
     /// Hull points bucketed by pseudo-angle around `center`, to start the visibility search near
     /// the new point.
     hash: Vec<u32>,
+    /// Each hull point's bucket in `hash`, kept from when it joined the hull.
+    hull_key: Vec<u32>,
     center: [f64; 2],
     stack: Vec<u32>,
     /// Budget of flips left (Lawson flips terminate; this only guards against bugs).
@@ -299,6 +301,7 @@ impl<'a> Builder<'a> {
             hull_prev: vec![EMPTY; n],
             hull_tri: vec![EMPTY; n],
             hash: vec![EMPTY; hash_size],
+            hull_key: vec![0; n],
             center,
             stack: Vec::with_capacity(64),
             flips_left: flip_budget,
@@ -337,12 +340,18 @@ impl<'a> Builder<'a> {
         if k < size { k } else { k % size }
     }
 
+    /// Point `v`, which has just joined the hull, becomes the hint of its bucket `key`.
+    #[inline]
+    fn hash_point(&mut self, v: u32, key: usize) {
+        self.hash[key] = v;
+        self.hull_key[v as usize] = key as u32;
+    }
+
     fn seed(&mut self, i0: u32, i1: u32, i2: u32) {
         for (v, next, prev) in [(i0, i1, i2), (i1, i2, i0), (i2, i0, i1)] {
             self.hull_next[v as usize] = next;
             self.hull_prev[v as usize] = prev;
-            let k = self.hash_key(self.xy(v));
-            self.hash[k] = v;
+            self.hash_point(v, self.hash_key(self.xy(v)));
         }
         let t = self.add_triangle(i0, i1, i2, EMPTY, EMPTY, EMPTY);
         self.hull_tri[i0 as usize] = t;
@@ -394,9 +403,8 @@ impl<'a> Builder<'a> {
         self.hull_next[i as usize] = n;
         self.hull_next[e as usize] = i;
         self.hull_prev[n as usize] = i;
-        self.hash[key] = i;
-        let k = self.hash_key(self.xy(e));
-        self.hash[k] = e;
+        self.hash_point(i, key);
+        self.hash[self.hull_key[e as usize] as usize] = e;
         Ok(true)
     }
 
@@ -597,8 +605,7 @@ impl<'a> Builder<'a> {
             self.hull_prev[p as usize] = v0;
             self.hull_next[p as usize] = v1;
             self.hull_prev[v1 as usize] = p;
-            let k = self.hash_key(self.xy(p));
-            self.hash[k] = p;
+            self.hash_point(p, self.hash_key(self.xy(p)));
             self.legalize(e as u32)?;
             return self.legalize(t1);
         }
@@ -632,60 +639,102 @@ impl<'a> Builder<'a> {
         }
     }
 
-    /// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one. After
-    /// a flip the same half-edge is checked again (it has a new neighbour) before the one the flip
-    /// exposed on the other side, which waits on the stack: delaunator's order.
+    /// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one.
     fn legalize(&mut self, a: u32) -> Result<(), GeometryError> {
-        self.stack.clear();
-        let mut a = a as usize;
-        loop {
-            let b = self.halfedges[a];
-            let (al, ar) = (next_halfedge(a), prev_halfedge(a));
-            let illegal = b != EMPTY && {
-                let bl = prev_halfedge(b as usize);
-                let [p0, pr, pl, p1] = [
-                    self.triangles[ar],
-                    self.triangles[a],
-                    self.triangles[al],
-                    self.triangles[bl],
-                ];
-                incircle(self.xy(pr), self.xy(pl), self.xy(p0), self.xy(p1)) > 0.0
-            };
-            if !illegal {
-                match self.stack.pop() {
-                    Some(next) => {
-                        a = next as usize;
-                        continue;
-                    }
-                    None => return Ok(()),
-                }
+        let flipped = legalize(
+            Mesh {
+                points: self.points,
+                triangles: &mut self.triangles,
+                halfedges: &mut self.halfedges,
+                hull_tri: &mut self.hull_tri,
+            },
+            &mut self.stack,
+            a,
+            self.flips_left,
+        );
+        match flipped {
+            Some(flips) => {
+                self.flips_left -= flips;
+                Ok(())
             }
-            if self.flips_left == 0 {
-                return Err(GeometryError::IterationLimit {
-                    step: "Delaunay flips",
-                    limit: self.flip_budget,
-                });
-            }
-            self.flips_left -= 1;
-            let b = b as usize;
-            let (bl, br) = (prev_halfedge(b), next_halfedge(b));
-            let (p0, p1) = (self.triangles[ar], self.triangles[bl]);
-            self.triangles[a] = p1;
-            self.triangles[b] = p0;
-            let hbl = self.halfedges[bl];
-            let har = self.halfedges[ar];
-            self.link(a as u32, hbl);
-            self.link(b as u32, har);
-            self.halfedges[ar] = bl as u32;
-            self.halfedges[bl] = ar as u32;
-            if hbl == EMPTY {
-                self.hull_tri[p1 as usize] = a as u32;
-            }
-            if har == EMPTY {
-                self.hull_tri[p0 as usize] = b as u32;
-            }
-            self.stack.push(br as u32);
+            None => Err(GeometryError::IterationLimit {
+                step: "Delaunay flips",
+                limit: self.flip_budget,
+            }),
         }
+    }
+}
+
+/// The arrays [`legalize`] changes, borrowed apart from the builder.
+struct Mesh<'a> {
+    points: &'a [[f64; 2]],
+    triangles: &'a mut [u32],
+    halfedges: &'a mut [u32],
+    hull_tri: &'a mut [u32],
+}
+
+/// Lawson flips from half-edge `a`, whose triangle's third point is the newly added one; returns
+/// the number of flips, or `None` past `budget`. After a flip the same half-edge is checked again
+/// (it has a new neighbour) before the one the flip exposed on the other side, which waits on the
+/// stack: delaunator's order.
+///
+/// A free function over separately borrowed slices rather than a method: the compiler may then
+/// assume the arrays do not overlap and keep their addresses and lengths in registers across the
+/// stores of a flip.
+fn legalize(m: Mesh<'_>, stack: &mut Vec<u32>, a: u32, budget: usize) -> Option<usize> {
+    let Mesh {
+        points,
+        triangles,
+        halfedges,
+        hull_tri,
+    } = m;
+    let xy = |v: u32| points[v as usize];
+    stack.clear();
+    let mut flips = 0;
+    let mut a = a as usize;
+    loop {
+        let b = halfedges[a];
+        let (al, ar) = (next_halfedge(a), prev_halfedge(a));
+        let illegal = b != EMPTY && {
+            let bl = prev_halfedge(b as usize);
+            let [p0, pr, pl, p1] = [triangles[ar], triangles[a], triangles[al], triangles[bl]];
+            incircle(xy(pr), xy(pl), xy(p0), xy(p1)) > 0.0
+        };
+        if !illegal {
+            match stack.pop() {
+                Some(next) => {
+                    a = next as usize;
+                    continue;
+                }
+                None => return Some(flips),
+            }
+        }
+        if flips == budget {
+            return None;
+        }
+        flips += 1;
+        let b = b as usize;
+        let (bl, br) = (prev_halfedge(b), next_halfedge(b));
+        let (p0, p1) = (triangles[ar], triangles[bl]);
+        triangles[a] = p1;
+        triangles[b] = p0;
+        let hbl = halfedges[bl];
+        let har = halfedges[ar];
+        halfedges[a] = hbl;
+        if hbl == EMPTY {
+            hull_tri[p1 as usize] = a as u32;
+        } else {
+            halfedges[hbl as usize] = a as u32;
+        }
+        halfedges[b] = har;
+        if har == EMPTY {
+            hull_tri[p0 as usize] = b as u32;
+        } else {
+            halfedges[har as usize] = b as u32;
+        }
+        halfedges[ar] = bl as u32;
+        halfedges[bl] = ar as u32;
+        stack.push(br as u32);
     }
 }
 
