@@ -8,7 +8,9 @@
 //! Our own sweep-hull ([`crate::delaunay`]) produces it, with exact predicates; it triangulates a
 //! duplicated position once and gives no triangles for collinear input. The tests and benchmarks
 //! cross-check it with spade's triangulation (`tests/support/spade.rs`, given to
-//! [`crate::detect`] through [`crate::Cloud::with_triangulation`]).
+//! [`crate::detect`] through [`crate::Cloud::with_triangulation`]) and put it beside delaunator's,
+//! the sweep Polylidar3D uses (`tests/delaunator.rs`: the same triangles on the bench clouds;
+//! `benches/triangulation.rs`).
 
 use crate::GeometryError;
 pub(crate) use crate::mesh::coord;
