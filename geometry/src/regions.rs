@@ -47,6 +47,31 @@ pub struct Regions {
     pub labels: Vec<u32>,
 }
 
+impl Regions {
+    /// Keeps the regions whose `keep` flag is set (one per region, missing ones kept), in order;
+    /// the triangles of the others are labelled [`EMPTY`].
+    pub fn retain(&mut self, keep: &[bool]) {
+        let mut index = vec![EMPTY; self.regions.len()];
+        let mut next = 0u32;
+        for (i, slot) in index.iter_mut().enumerate() {
+            if keep.get(i).copied().unwrap_or(true) {
+                *slot = next;
+                next += 1;
+            }
+        }
+        for label in &mut self.labels {
+            if *label != EMPTY {
+                *label = index[*label as usize];
+            }
+        }
+        let mut i = 0;
+        self.regions.retain(|_| {
+            i += 1;
+            index[i - 1] != EMPTY
+        });
+    }
+}
+
 /// Grows regions over the triangles whose `keep` flag is set (one flag per triangle); `points` are
 /// the triangulated points with their z.
 pub fn extract_regions(
