@@ -35,8 +35,9 @@ pub const MIN_PLATFORM_RISE_M: f64 = 1.0;
 pub const PLATFORM_ROOF_AREA_FACTOR: f64 = 2.0;
 
 /// A raised platform's centroid lies inside the outer ring of the roof around it, or at most this
-/// far outside, metres: a structure on the roof, not a taller building beside it.
-pub const PLATFORM_REACH_M: f64 = 1.0;
+/// far outside, metres: a structure on the roof, or at the edge of what the scan shows of it
+/// (half the widest housing, 2.3 m, past the roof's last points).
+pub const PLATFORM_REACH_M: f64 = 2.5;
 
 /// A region within this height of the ground around it is street level, metres: a step, a kerb or
 /// a loading dock, never a roof (the simulator's lowest roof is 10 m up, a one-storey building's
@@ -47,15 +48,16 @@ pub const STREET_LEVEL_M: f64 = 1.5;
 /// centroid, metres.
 pub const STREET_RADIUS_M: f64 = 30.0;
 
-/// The ground's height is this quantile of the heights of the points classed ground around a
-/// region.
-pub const GROUND_QUANTILE: f64 = 0.1;
+/// The lowest level of the scan around a region is this quantile of the heights of its points
+/// there.
+pub const LOW_QUANTILE: f64 = 0.02;
 
-/// Fewer points classed ground around a region say nothing of the street.
+/// Fewer points (or points classed ground) at the lowest level around a region say nothing of
+/// the street.
 pub const MIN_GROUND_POINTS: usize = 10;
 
-/// The scan holds two levels when another region stands at least this high over the ground,
-/// metres: a roof of one storey or more.
+/// The scan holds two levels when another region, at least as large, stands at least this high
+/// over the lowest level, metres: a roof of one storey or more.
 pub const MIN_ROOF_ABOVE_GROUND_M: f64 = 2.5;
 
 /// For each region (same order as `polygons`), whether it is no roof to land on: a raised
@@ -66,8 +68,9 @@ pub fn no_roof(
     points: &[[f64; 3]],
     classes: Option<&[u8]>,
 ) -> Vec<bool> {
+    let ground = classes.map_or_else(Vec::new, |c| ground_points(points, c));
     let mut drop: Vec<bool> = (0..regions.regions.len())
-        .map(|r| classes.is_some_and(|c| is_street_level(regions, r, points, c)))
+        .map(|r| is_street_level(regions, polygons, r, points, &ground))
         .collect();
     let platforms: Vec<bool> = (0..regions.regions.len())
         .map(|r| !drop[r] && is_raised_platform(regions, polygons, r, &drop))
@@ -110,27 +113,56 @@ fn outer(polygon: &Polygon) -> Polygon {
     }
 }
 
-/// Whether region `r` lies within [`STREET_LEVEL_M`] of the ground around it, where the scan
-/// holds another region at least [`MIN_ROOF_ABOVE_GROUND_M`] above that ground.
-pub fn is_street_level(regions: &Regions, r: usize, points: &[[f64; 3]], classes: &[u8]) -> bool {
-    let region = &regions.regions[r];
-    let [cx, cy, z] = region.mean;
-    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
-    let mut ground: Vec<f64> = points
-        .iter()
-        .zip(classes)
-        .filter(|(p, c)| {
-            **c == SemanticClass::Ground as u8 && (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2
-        })
-        .map(|(p, _)| p[2])
-        .collect();
-    if ground.len() < MIN_GROUND_POINTS {
+/// Whether region `r` lies within [`STREET_LEVEL_M`] of the lowest level of the scan around it
+/// ([`lowest_level`]), where points classed ground lie, and another region at least as large
+/// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level.
+pub fn is_street_level(
+    regions: &Regions,
+    polygons: &[Polygon],
+    r: usize,
+    points: &[[f64; 3]],
+    ground: &[[f64; 3]],
+) -> bool {
+    let [cx, cy, z] = regions.regions[r].mean;
+    let Some(low) = lowest_level(points, [cx, cy]) else {
         return false;
+    };
+    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
+    let on_street = (ground.iter())
+        .filter(|p| {
+            (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2 && p[2] - low < STREET_LEVEL_M
+        })
+        .count();
+    let area = polygons[r].area();
+    z - low < STREET_LEVEL_M
+        && on_street >= MIN_GROUND_POINTS
+        && (regions.regions.iter().zip(polygons))
+            .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
+}
+
+/// The lowest level of the points within [`STREET_RADIUS_M`] of `at`: the
+/// [`LOW_QUANTILE`] of their heights (a few stray returns below the street do not move it);
+/// `None` without [`MIN_GROUND_POINTS`] points.
+fn lowest_level(points: &[[f64; 3]], [cx, cy]: [f64; 2]) -> Option<f64> {
+    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
+    let mut heights: Vec<f64> = (points.iter())
+        .filter(|p| (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2)
+        .map(|p| p[2])
+        .collect();
+    if heights.len() < MIN_GROUND_POINTS {
+        return None;
     }
-    let k = ((ground.len() - 1) as f64 * GROUND_QUANTILE).round() as usize;
-    let (_, &mut level, _) = ground.select_nth_unstable_by(k, f64::total_cmp);
-    (z - level).abs() < STREET_LEVEL_M
-        && (regions.regions.iter()).any(|o| o.mean[2] - level >= MIN_ROOF_ABOVE_GROUND_M)
+    let k = ((heights.len() - 1) as f64 * LOW_QUANTILE).round() as usize;
+    let (_, &mut level, _) = heights.select_nth_unstable_by(k, f64::total_cmp);
+    Some(level)
+}
+
+/// The points classed ground.
+fn ground_points(points: &[[f64; 3]], classes: &[u8]) -> Vec<[f64; 3]> {
+    (points.iter().zip(classes))
+        .filter(|(_, c)| **c == SemanticClass::Ground as u8)
+        .map(|(p, _)| *p)
+        .collect()
 }
 
 #[cfg(test)]
@@ -178,10 +210,22 @@ mod tests {
         let mut cloud = (Vec::new(), Vec::new());
         let inside = |x: f64, y: f64, a: f64, b: f64| x >= a && x <= b && y >= a && y <= b;
         let (a, b) = (10.0 - side / 2.0, 10.0 + side / 2.0);
-        grid([0.0, 0.0, 20.0, 20.0], 20.0, ROOF, |x, y| inside(x, y, a - 0.2, b + 0.2), &mut cloud);
+        grid(
+            [0.0, 0.0, 20.0, 20.0],
+            20.0,
+            ROOF,
+            |x, y| inside(x, y, a - 0.2, b + 0.2),
+            &mut cloud,
+        );
         grid([a, a, b, b], 20.0 + rise, ROOF, |_, _| false, &mut cloud);
         let building = |x, y| inside(x, y, -0.5, 20.5);
-        grid([-10.0, -10.0, 30.0, 30.0], 0.0, GROUND, building, &mut cloud);
+        grid(
+            [-10.0, -10.0, 30.0, 30.0],
+            0.0,
+            GROUND,
+            building,
+            &mut cloud,
+        );
         cloud
     }
 
@@ -226,8 +270,20 @@ mod tests {
                 || (19.5..=26.5).contains(&x) && (-12.5..=-5.5).contains(&y)
         };
         grid([-10.0, -20.0, 40.0, 30.0], 0.0, GROUND, taken, &mut cloud);
-        grid([20.0, 4.0, 26.0, 10.0], 0.0, ROOF, |x, y| !patch(x, y), &mut cloud);
-        grid([20.0, -12.0, 26.0, -6.0], 3.0, ROOF, |x, y| !low(x, y), &mut cloud);
+        grid(
+            [20.0, 4.0, 26.0, 10.0],
+            0.0,
+            ROOF,
+            |x, y| !patch(x, y),
+            &mut cloud,
+        );
+        grid(
+            [20.0, -12.0, 26.0, -6.0],
+            3.0,
+            ROOF,
+            |x, y| !low(x, y),
+            &mut cloud,
+        );
         let found = sites(&cloud);
         assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 3.0).abs() < 0.1), "{found:?}");
@@ -238,6 +294,33 @@ mod tests {
             .map(|(p, c)| (*p, *c))
             .unzip();
         assert!(sites(&street).iter().any(|s| s.0.abs() < 0.1));
+    }
+
+    #[test]
+    fn a_roof_the_model_calls_ground_in_part_stays_when_no_street_is_in_the_scan() {
+        // A 14 m roof 20 m up seen alone (no street in the scan), a 4 m band of it called
+        // ground, and a 3 m structure called roof standing 2.85 m above: the lowest level is
+        // the roof's, with points called ground on it, but nothing larger stands above it.
+        let mut cloud = (Vec::new(), Vec::new());
+        let band = |_: f64, y: f64| y > 10.0;
+        let top = |x: f64, y: f64| (5.3..=8.7).contains(&x) && (3.3..=6.7).contains(&y);
+        grid(
+            [0.0, 0.0, 14.0, 14.0],
+            20.0,
+            ROOF,
+            |x, y| band(x, y) || top(x, y),
+            &mut cloud,
+        );
+        grid(
+            [0.0, 10.05, 14.0, 14.0],
+            20.0,
+            GROUND,
+            |x, y| !band(x, y),
+            &mut cloud,
+        );
+        grid([5.5, 3.5, 8.5, 6.5], 22.85, ROOF, |_, _| false, &mut cloud);
+        let found = sites(&cloud);
+        assert!(found.iter().any(|s| (s.0 - 20.0).abs() < 0.1), "{found:?}");
     }
 
     /// The regions and polygons `detect` finds in `pts`.

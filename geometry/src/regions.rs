@@ -349,6 +349,30 @@ mod tests {
     }
 
     #[test]
+    fn retain_drops_regions_and_relabels_the_rest() {
+        let (pts, tri) = grid();
+        // Two regions: the triangles left of x = 0.4 and those right of x = 0.8.
+        let x = |t: usize| {
+            let v = &tri.triangles[3 * t..3 * t + 3];
+            v.iter().map(|&i| pts[i as usize][0]).sum::<f64>() / 3.0
+        };
+        let keep: Vec<bool> = (0..tri.len()).map(|t| x(t) < 0.4 || x(t) > 0.8).collect();
+        let mut r = extract_regions(&tri, &pts, keep, &RegionParams { min_triangles: 1 }).unwrap();
+        assert_eq!(r.regions.len(), 2);
+        let second = r.regions[1].clone();
+        r.retain(&[false, true]);
+        assert_eq!(r.regions, vec![second.clone()]);
+        for (t, &label) in r.labels.iter().enumerate() {
+            let expected = if second.triangles.contains(&(t as u32)) {
+                0
+            } else {
+                EMPTY
+            };
+            assert_eq!(label, expected, "triangle {t}");
+        }
+    }
+
+    #[test]
     fn a_removed_column_splits_a_grid_into_two_regions() {
         let mut pts = Vec::new();
         for y in 0..5 {
