@@ -13,11 +13,11 @@
 //!   storey's floor: tens of square metres or more, which the area bound keeps.
 //! - **A street called roof** ([`is_street_level`]): a region within [`STREET_LEVEL_M`] of the
 //!   lowest level of the scan within [`STREET_RADIUS_M`] (its [`LOW_QUANTILE`]), where points
-//!   classed ground lie, while a region at least as large stands well above that level, or any
-//!   region [`MIN_BUILDING_ABOVE_GROUND_M`] above it, higher than a structure on a roof. The
-//!   level is the scan's, not that of the points classed ground: a model that calls part of a
-//!   roof ground would otherwise put the street on the roof; and a roof the scan shows alone,
-//!   with the points the model calls ground on it and an entrance on top, is kept.
+//!   classed ground lie, while a region at least as large stands [`MIN_ROOF_ABOVE_GROUND_M`]
+//!   or more above that level. The level is the scan's, not that of the points classed ground:
+//!   a model that calls part of a roof ground would otherwise put the street on the roof; and a
+//!   roof the scan shows alone, with points the model calls ground on it, is kept unless a
+//!   larger region stands above it.
 //!
 //! Both judge from heights, areas and classes alone, so they apply to a scan and to a fused map
 //! alike.
@@ -62,12 +62,6 @@ pub const MIN_GROUND_POINTS: usize = 10;
 /// The scan holds two levels when another region, at least as large, stands at least this high
 /// over the lowest level, metres: a roof of one storey or more.
 pub const MIN_ROOF_ABOVE_GROUND_M: f64 = 2.5;
-
-/// ... or when another region of any size stands at least this high over it, metres: higher
-/// than any structure on a roof but a water tower (an entrance or a small building on a roof is
-/// at most 4.5 m tall). A street patch the model calls roof may be larger than the parts of the
-/// roofs in view.
-pub const MIN_BUILDING_ABOVE_GROUND_M: f64 = 5.0;
 
 /// For each region (same order as `polygons`), whether it is no roof to land on: a raised
 /// platform on a larger roof, or (with classes) a street called roof.
@@ -124,8 +118,7 @@ fn outer(polygon: &Polygon) -> Polygon {
 
 /// Whether region `r` lies within [`STREET_LEVEL_M`] of the lowest level of the scan around it
 /// ([`lowest_level`]), where points classed ground lie, and another region at least as large
-/// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level, or another of any size at
-/// least [`MIN_BUILDING_ABOVE_GROUND_M`].
+/// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level.
 pub fn is_street_level(
     regions: &Regions,
     polygons: &[Polygon],
@@ -140,17 +133,15 @@ pub fn is_street_level(
     let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
     let on_street = (ground.iter())
         .filter(|p| {
-            (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2 && p[2] - low < STREET_LEVEL_M
+            (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2
+                && (p[2] - low).abs() < STREET_LEVEL_M
         })
         .count();
     let area = polygons[r].area();
     z - low < STREET_LEVEL_M
         && on_street >= MIN_GROUND_POINTS
-        && (regions.regions.iter().zip(polygons)).any(|(o, p)| {
-            let above = o.mean[2] - low;
-            above >= MIN_BUILDING_ABOVE_GROUND_M
-                || (above >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
-        })
+        && (regions.regions.iter().zip(polygons))
+            .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
 }
 
 /// The lowest level of the points within [`STREET_RADIUS_M`] of `at`: the
@@ -301,26 +292,6 @@ mod tests {
         assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 3.0).abs() < 0.1), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 20.0).abs() < 0.1), "{found:?}");
-        // A street patch larger than the part of a roof in view (a 4 m roof 15 m up) is street.
-        let mut small = (Vec::new(), Vec::new());
-        let roof = |x: f64, y: f64| (-0.5..=4.5).contains(&x) && (-0.5..=4.5).contains(&y);
-        grid([0.0, 0.0, 4.0, 4.0], 15.0, ROOF, |_, _| false, &mut small);
-        grid(
-            [-10.0, -20.0, 40.0, 30.0],
-            0.0,
-            GROUND,
-            |x, y| roof(x, y) || patch(x, y),
-            &mut small,
-        );
-        grid(
-            [20.0, 4.0, 26.0, 10.0],
-            0.0,
-            ROOF,
-            |x, y| !patch(x, y),
-            &mut small,
-        );
-        let found = sites(&small);
-        assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         // With no roof above the street in the scan, the street's level says nothing.
         let street: (Vec<[f32; 3]>, Vec<u8>) = (cloud.0.iter().zip(&cloud.1))
             .filter(|(p, _)| p[2] < 1.0)
