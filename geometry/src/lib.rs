@@ -12,7 +12,9 @@
 //! 1. [`triangulation`]: 2-D Delaunay triangulation of the points' x/y (exact predicates);
 //! 2. [`filter`]: the paper's Algorithm 1 (edge length, normal, height bypass, classes);
 //! 3. [`regions`]: the paper's Algorithm 2, region growing over triangle adjacency;
-//! 4. [`boundary`]: each region's boundary half-edges walked into an OGC-valid polygon with holes;
+//! 4. [`boundary`]: each region's boundary half-edges walked into an OGC-valid polygon with holes,
+//!    less the regions the cloud's levels show are no roof ([`levels`]: a small platform well
+//!    above a larger roof, a street called roof);
 //! 5. [`polylabel`]: pole of inaccessibility with its distance, within a requested precision;
 //! 6. [`ranking`]: filters and ordering of the sites by safe radius.
 //!
@@ -43,6 +45,7 @@ mod cloud;
 pub mod delaunay;
 pub mod filter;
 pub mod geodetic;
+pub mod levels;
 mod mesh;
 pub mod polylabel;
 pub mod ranking;
@@ -354,11 +357,12 @@ pub fn detect(cloud: &Cloud<'_>, params: &Params) -> Result<Detection, GeometryE
     let t2 = Instant::now();
     timings.triangle_filter = t2 - t1;
 
-    let regions = planar_regions(tri, &pts, mask, params, cloud.kind)?;
+    let mut regions = planar_regions(tri, &pts, mask, params, cloud.kind)?;
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 
-    let outlines = outlines(tri, &pts, &regions, cloud)?;
+    let mut outlines = outlines(tri, &pts, &regions, cloud)?;
+    drop_no_roof(&mut regions, &mut outlines, &pts, cloud.classes);
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
@@ -483,6 +487,28 @@ fn outlines(
         polygons,
         parts: Some(own),
     })
+}
+
+/// Leaves out the regions (with their outlines) that the cloud's levels show are no roof
+/// ([`levels::no_roof`]).
+fn drop_no_roof(
+    regions: &mut regions::Regions,
+    outlines: &mut Outlines,
+    pts: &[[f64; 3]],
+    classes: Option<&[u8]>,
+) {
+    let drop = levels::no_roof(regions, &outlines.polygons, pts, classes);
+    if !drop.contains(&true) {
+        return;
+    }
+    let keep: Vec<bool> = drop.iter().map(|d| !d).collect();
+    regions.retain(&keep);
+    let mut k = keep.iter();
+    outlines.polygons.retain(|_| *k.next().unwrap_or(&true));
+    if let Some(parts) = &mut outlines.parts {
+        let mut k = keep.iter();
+        parts.retain(|_| *k.next().unwrap_or(&true));
+    }
 }
 
 /// The ranked sites: polylabel in each outline, clear of the cloud's keep-out disks. Where a

@@ -47,6 +47,31 @@ pub struct Regions {
     pub labels: Vec<u32>,
 }
 
+impl Regions {
+    /// Keeps the regions whose `keep` flag is set (one per region, missing ones kept), in order;
+    /// the triangles of the others are labelled [`EMPTY`].
+    pub fn retain(&mut self, keep: &[bool]) {
+        let mut index = vec![EMPTY; self.regions.len()];
+        let mut next = 0u32;
+        for (i, slot) in index.iter_mut().enumerate() {
+            if keep.get(i).copied().unwrap_or(true) {
+                *slot = next;
+                next += 1;
+            }
+        }
+        for label in &mut self.labels {
+            if *label != EMPTY {
+                *label = index[*label as usize];
+            }
+        }
+        let mut i = 0;
+        self.regions.retain(|_| {
+            i += 1;
+            index[i - 1] != EMPTY
+        });
+    }
+}
+
 /// Grows regions over the triangles whose `keep` flag is set (one flag per triangle); `points` are
 /// the triangulated points with their z.
 pub fn extract_regions(
@@ -321,6 +346,30 @@ mod tests {
             .unwrap();
         let corner: Vec<bool> = (0..tri.len()).map(|t| t == on_hull).collect();
         assert_eq!(close(&pts, &tri, &corner, 4.0), (1, 1));
+    }
+
+    #[test]
+    fn retain_drops_regions_and_relabels_the_rest() {
+        let (pts, tri) = grid();
+        // Two regions: the triangles left of x = 0.4 and those right of x = 0.8.
+        let x = |t: usize| {
+            let v = &tri.triangles[3 * t..3 * t + 3];
+            v.iter().map(|&i| pts[i as usize][0]).sum::<f64>() / 3.0
+        };
+        let keep: Vec<bool> = (0..tri.len()).map(|t| x(t) < 0.4 || x(t) > 0.8).collect();
+        let mut r = extract_regions(&tri, &pts, keep, &RegionParams { min_triangles: 1 }).unwrap();
+        assert_eq!(r.regions.len(), 2);
+        let second = r.regions[1].clone();
+        r.retain(&[false, true]);
+        assert_eq!(r.regions, vec![second.clone()]);
+        for (t, &label) in r.labels.iter().enumerate() {
+            let expected = if second.triangles.contains(&(t as u32)) {
+                0
+            } else {
+                EMPTY
+            };
+            assert_eq!(label, expected, "triangle {t}");
+        }
     }
 
     #[test]

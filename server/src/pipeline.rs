@@ -229,17 +229,44 @@ pub fn run_pipeline(
         Judged::Alone,
     )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
+    let coarse = c
+        .view
+        .as_ref()
+        .map_or_else(Vec::new, |v| seen_coarsely(v, &c.points));
     let located = Located {
         points: &c.points,
         classes: c.classes.as_deref(),
         kind: CloudKind::Scan,
         keep_out: &keep_out,
-        unresolved: &[],
+        unresolved: &coarse,
         origin,
         params: &options.params,
         triangulated: None,
     };
     locate(frame, located, c.mode, c.timings, start)
+}
+
+/// A frame judged alone keeps its safe circles off the places its camera saw no finer than this,
+/// metres per class pixel (the longer side of the patch of level ground a pixel covers): an
+/// obstacle the scan lines missed is there only in the image, and an air vent (0.4-1 m across)
+/// spans under three pixels this coarse, too few for the model to call it. A 320-pixel mask of a
+/// 70° camera covers 0.3 m at 69 m straight down and at about 53 m looking 50° down: the
+/// highest frames of an approach (EVALUATION.md, "Today: single frames"; 0.2 m cost 0.09 of
+/// mean IoU there, 0.4 m removed nothing). A fused stream keeps the same kind of rule with its
+/// own bound (`fusion.max_pixel_footprint_m`), over the finest view any of its frames had.
+pub const SINGLE_FRAME_MAX_PIXEL_FOOTPRINT_M: f64 = 0.3;
+
+/// Per point: whether `view` saw it coarser than [`SINGLE_FRAME_MAX_PIXEL_FOOTPRINT_M`] (points
+/// out of view are left unflagged: no pixel gave them a class).
+fn seen_coarsely(view: &PointView, points: &[[f32; 3]]) -> Vec<bool> {
+    points
+        .iter()
+        .map(|p| {
+            let p = Point3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]));
+            view.footprint_on_level_ground(&p)
+                .is_some_and(|f| f > SINGLE_FRAME_MAX_PIXEL_FOOTPRINT_M)
+        })
+        .collect()
 }
 
 /// The move from world coordinates to those relative to `origin`.
@@ -381,7 +408,8 @@ struct Located<'a> {
     kind: CloudKind,
     keep_out: &'a [&'a ObstacleRays],
     /// Per point (empty for none): on landable ground no camera has seen finely enough yet
-    /// (`landing_fusion::Fused::unresolved`). Safe circles keep off every triangle with such a
+    /// (`landing_fusion::Fused::unresolved`), or, for a frame judged alone, seen by its camera
+    /// only coarsely ([`SINGLE_FRAME_MAX_PIXEL_FOOTPRINT_M`]). Safe circles keep off every triangle with such a
     /// vertex: the points are a sample of the unresolved ground, and early in an approach a
     /// 16-beam scan's lines lie up to ~2.4 m apart on the roof, so the ground between them is as
     /// unresolved as they are. The polygons still hold those triangles (the votes call them
@@ -624,6 +652,56 @@ mod tests {
         assert_eq!((out.drone_id.as_str(), out.sequence), ("d1", 7));
         assert_eq!(out.segmentation_mode, SegmentationMode::None);
         assert!(out.timings.total.is_some());
+    }
+
+    #[test]
+    fn a_frame_judged_alone_keeps_its_circles_off_what_its_camera_saw_coarsely() {
+        // A 12 m roof of points 0.3 m apart, 20 m below a camera looking straight down, all
+        // rooftop in its class image: with a focal length of 100 pixels each pixel covers 0.2 m
+        // of the roof, with 40 pixels 0.5 m, coarser than a frame judged alone lands on.
+        let mut points = Vec::new();
+        for y in 0..40 {
+            for x in 0..40 {
+                let at = |i: i32| 0.3 * f64::from(i) - 6.0 + 0.001 * f64::from((i * 7) % 5);
+                points.push([at(x), at(y), -20.0]);
+            }
+        }
+        let side = 120u32;
+        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let seen = |f: f64| Frame {
+            class_image: Some(CameraImage {
+                pixels: ImagePixels::Mono8 {
+                    width: side,
+                    height: side,
+                    step: side,
+                    data: vec![landing_geometry::SemanticClass::BuildingRooftop as u8; 120 * 120],
+                },
+                pose: Isometry3::from_parts(Vector3::zeros().into(), down),
+                intrinsics: Intrinsics {
+                    width: side,
+                    height: side,
+                    fx: f,
+                    fy: f,
+                    cx: 60.0,
+                    cy: 60.0,
+                },
+            }),
+            ..frame(points.clone(), None)
+        };
+        let options = FrameOptions {
+            segmentation_mode: SegmentationMode::ClassImage,
+            ..FrameOptions::default()
+        };
+        let pipeline = Pipeline::default();
+        let fine = run_pipeline(&seen(100.0), &options, &pipeline).unwrap();
+        assert_eq!(fine.sites.len(), 1);
+        assert!(
+            fine.sites[0].safe_radius_m > 5.0,
+            "{}",
+            fine.sites[0].safe_radius_m
+        );
+        let coarse = run_pipeline(&seen(40.0), &options, &pipeline).unwrap();
+        assert!(coarse.sites.is_empty(), "{:?}", coarse.sites);
     }
 
     #[test]
