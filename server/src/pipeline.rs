@@ -553,6 +553,30 @@ pub fn pose(position: [f64; 3], quaternion: [f64; 4]) -> Option<Isometry3<f64>> 
 mod tests {
     use super::*;
 
+    /// A 120 × 120 class image (`data`, row-major) from a camera at the origin looking straight
+    /// down, focal length `f` pixels.
+    fn looking_down(f: f64, data: Vec<u8>) -> CameraImage {
+        let side = 120u32;
+        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        CameraImage {
+            pixels: ImagePixels::Mono8 {
+                width: side,
+                height: side,
+                step: side,
+                data,
+            },
+            pose: Isometry3::from_parts(Vector3::zeros().into(), down),
+            intrinsics: Intrinsics {
+                width: side,
+                height: side,
+                fx: f,
+                fy: f,
+                cx: 60.0,
+                cy: 60.0,
+            },
+        }
+    }
+
     fn frame(points: Vec<[f64; 3]>, classes: Option<Vec<u8>>) -> Frame {
         Frame {
             drone_id: "d1".into(),
@@ -666,26 +690,11 @@ mod tests {
                 points.push([at(x), at(y), -20.0]);
             }
         }
-        let side = 120u32;
-        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
         let seen = |f: f64| Frame {
-            class_image: Some(CameraImage {
-                pixels: ImagePixels::Mono8 {
-                    width: side,
-                    height: side,
-                    step: side,
-                    data: vec![landing_geometry::SemanticClass::BuildingRooftop as u8; 120 * 120],
-                },
-                pose: Isometry3::from_parts(Vector3::zeros().into(), down),
-                intrinsics: Intrinsics {
-                    width: side,
-                    height: side,
-                    fx: f,
-                    fy: f,
-                    cx: 60.0,
-                    cy: 60.0,
-                },
-            }),
+            class_image: Some(looking_down(
+                f,
+                vec![landing_geometry::SemanticClass::BuildingRooftop as u8; 120 * 120],
+            )),
             ..frame(points.clone(), None)
         };
         let options = FrameOptions {
@@ -790,24 +799,7 @@ mod tests {
                 }
             }
         }
-        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
-        let labels = CameraImage {
-            pixels: ImagePixels::Mono8 {
-                width: side,
-                height: side,
-                step: side,
-                data,
-            },
-            pose: Isometry3::from_parts(Vector3::zeros().into(), down),
-            intrinsics: Intrinsics {
-                width: side,
-                height: side,
-                fx: f,
-                fy: f,
-                cx: 60.0,
-                cy: 60.0,
-            },
-        };
+        let labels = looking_down(f, data);
         let roof = |missed: bool| {
             let mut points = Vec::new();
             for y in 0..60 {
