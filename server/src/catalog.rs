@@ -53,7 +53,13 @@ struct Shared {
     reader: RwLock<Result<Arc<dyn Store>, String>>,
     metrics: Metrics,
     writer: Mutex<Option<std::thread::JoinHandle<()>>>,
+    /// Searches running on blocking threads, bounded: a frozen database holds each one's thread
+    /// until it answers, and a search past the bound answers UNAVAILABLE at once.
+    searching: Arc<tokio::sync::Semaphore>,
 }
+
+/// The most searches that wait on the database at once.
+const SEARCHES_IN_FLIGHT: usize = 32;
 
 #[derive(Default)]
 struct Queue {
@@ -88,6 +94,7 @@ impl Catalog {
             reader: RwLock::new(Err("the store is being opened".into())),
             metrics,
             writer: Mutex::new(None),
+            searching: Arc::new(tokio::sync::Semaphore::new(SEARCHES_IN_FLIGHT)),
         });
         let writer = shared.clone();
         let handle = std::thread::Builder::new()
@@ -123,8 +130,37 @@ impl Catalog {
         s.wake.notify_one();
     }
 
-    /// One page of a search; blocks on the database (call it off the async runtime).
-    pub fn search(&self, query: &SearchQuery) -> Result<SearchPage, Error> {
+    /// One page of a search, run on a blocking thread: UNAVAILABLE naming the catalog when the
+    /// database has not answered within `catalog.search_timeout_s`, or when
+    /// [`SEARCHES_IN_FLIGHT`] searches already wait on it. The blocking `postgres` client has no
+    /// deadline of its own; a search past its deadline holds its thread (and its place in the
+    /// bound) until the database answers or the connection drops.
+    pub async fn search(&self, query: SearchQuery) -> Result<SearchPage, Error> {
+        let location = &self.shared.location;
+        let Ok(permit) = self.shared.searching.clone().try_acquire_owned() else {
+            query.validate(Timestamp::now())?;
+            return Err(Error::CatalogUnavailable(format!(
+                "{location:?}: {SEARCHES_IN_FLIGHT} searches are waiting on it already"
+            )));
+        };
+        let catalog = self.clone();
+        let searched = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            catalog.search_blocking(&query)
+        });
+        let timeout = Duration::from_secs_f64(self.shared.config.search_timeout_s);
+        match tokio::time::timeout(timeout, searched).await {
+            Ok(Ok(page)) => page,
+            Ok(Err(e)) => Err(Error::Internal(format!("catalog search: {e}"))),
+            Err(_) => Err(Error::CatalogUnavailable(format!(
+                "{location:?} did not answer within catalog.search_timeout_s = {} s",
+                timeout.as_secs_f64()
+            ))),
+        }
+    }
+
+    /// One page of a search; blocks on the database.
+    fn search_blocking(&self, query: &SearchQuery) -> Result<SearchPage, Error> {
         let reader = match &*self.shared.reader.read().unwrap_or_else(|e| e.into_inner()) {
             Ok(store) => store.clone(),
             Err(why) => {
@@ -444,7 +480,7 @@ mod tests {
         let give_up = Instant::now() + Duration::from_secs(10);
         loop {
             let e = catalog
-                .search(&SearchQuery::new(
+                .search_blocking(&SearchQuery::new(
                     landing_catalog::LatLon::new(40.7, -74.0),
                     500.0,
                 ))

@@ -63,6 +63,9 @@ pub struct CatalogConfig {
     pub expire_interval_s: f64,
     /// How often a store that could not be opened, or a failed write, is tried again, seconds.
     pub retry_interval_s: f64,
+    /// A search the database has not answered in this long answers UNAVAILABLE (a frozen
+    /// database holds the call itself longer), seconds.
+    pub search_timeout_s: f64,
 }
 
 impl Default for CatalogConfig {
@@ -80,6 +83,7 @@ impl Default for CatalogConfig {
             retention_s: 30.0 * 24.0 * 3600.0,
             expire_interval_s: 600.0,
             retry_interval_s: 5.0,
+            search_timeout_s: 1.0,
         }
     }
 }
@@ -153,6 +157,12 @@ impl CatalogConfig {
                 self.retry_interval_s,
                 0.01..=3600.0,
                 "0.01..=3600 seconds",
+            ),
+            (
+                "catalog.search_timeout_s",
+                self.search_timeout_s,
+                0.01..=60.0,
+                "0.01..=60 seconds",
             ),
         ] {
             in_range(key, value, range, shown)?;

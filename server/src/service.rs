@@ -201,11 +201,7 @@ impl v1::landing_service_server::LandingService for LandingService {
             default_max_age: catalog.max_age(),
         })
         .map_err(|e| to_status(&e))?;
-        // The store blocks on its database: off the async runtime.
-        let page = tokio::task::spawn_blocking(move || catalog.search(&query))
-            .await
-            .map_err(|e| to_status(&crate::Error::Internal(format!("catalog search: {e}"))))?
-            .map_err(|e| to_status(&e))?;
+        let page = catalog.search(query).await.map_err(|e| to_status(&e))?;
         Ok(Response::new(response(page)))
     }
 }

@@ -852,3 +852,95 @@ async fn latencies(
     during.sort();
     (sent, before, during)
 }
+
+/// How long a search may wait on the database in [`frozen_postgres_holds_no_search_past_its_deadline`].
+const SEARCH_TIMEOUT: Duration = Duration::from_millis(500);
+
+/// The server on a PostgreSQL + PostGIS of the test's own, fused streams running throughout; the
+/// database freezes mid-load (every process SIGSTOPped, as a paused VM: connections stay open and
+/// the kernel still acknowledges, so neither TCP keepalives nor the user timeout fire) for
+/// [`DOWN`], then runs on. Every frame is answered within [`ON_TIME`]; every search answers
+/// UNAVAILABLE naming the catalog once `catalog.search_timeout_s` has passed, not when the
+/// database answers; after the thaw searches find sites again and writes resume.
+#[test]
+fn frozen_postgres_holds_no_search_past_its_deadline() {
+    let started = Instant::now();
+    let db = Arc::new(pg::dedicated());
+    let url = postgres_url(&db.create_database());
+    let mut env = catalog_env("URL", &url);
+    env.push((
+        "LANDING__CATALOG__SEARCH_TIMEOUT_S".into(),
+        SEARCH_TIMEOUT.as_secs_f64().to_string(),
+    ));
+    let frames = recorded_frames();
+    tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(postgres_frozen(db, env, frames));
+    assert!(started.elapsed() < Duration::from_secs(90));
+}
+
+async fn postgres_frozen(
+    db: Arc<pg::PgServer>,
+    env: Vec<(String, String)>,
+    frames: Arc<Vec<v1::Frame>>,
+) {
+    let server = ServerProcess::start(&env).await;
+    let mut client = LandingServiceClient::new(server.channel().await);
+    let (stop, streams) = fleet(&server, &frames).await;
+    until_metric(&server, WRITES, Duration::from_secs(30), |n| n >= 8.0).await;
+    search_when_open(&mut client, origin(0)).await;
+
+    db.freeze();
+    let frozen_at = Instant::now();
+    let mut searches = Vec::new();
+    while frozen_at.elapsed() < DOWN {
+        let asked = Instant::now();
+        let status = client
+            .search_landing_sites(search_near(origin(0)))
+            .await
+            .expect_err("no search answers while the database is frozen");
+        let took = asked.elapsed();
+        assert_eq!(status.code(), tonic::Code::Unavailable, "{status:?}");
+        assert!(
+            status.message().contains("catalog") && status.message().contains("did not answer"),
+            "{status:?}"
+        );
+        assert!(
+            took >= SEARCH_TIMEOUT && took < SEARCH_TIMEOUT + Duration::from_millis(500),
+            "a search took {took:?}"
+        );
+        searches.push(took);
+    }
+    let written = server.metric(WRITES).await;
+    db.thaw();
+    let thawed_at = Instant::now();
+    let give_up = thawed_at + Duration::from_secs(15);
+    while sites_near_origins(&mut client).await == 0 {
+        assert!(
+            Instant::now() < give_up,
+            "no search finds sites after the thaw"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let resumed = until_metric(&server, WRITES, Duration::from_secs(15), |n| n > written).await;
+
+    stop.send_replace(true);
+    let (sent, before, during) = latencies(streams, frozen_at, thawed_at).await;
+    let ms = |d: &Duration| d.as_secs_f64() * 1e3;
+    eprintln!(
+        "{sent} frames sent and answered; latency before the freeze p50 {:.0} ms max {:.0} ms, \
+         while frozen p50 {:.0} ms max {:.0} ms ({} frames); {} searches UNAVAILABLE while \
+         frozen, in {:.0}-{:.0} ms; writes resumed after the thaw ({written} → {resumed})",
+        ms(&before[before.len() / 2]),
+        ms(before.last().unwrap()),
+        ms(&during[during.len() / 2]),
+        ms(during.last().unwrap()),
+        during.len(),
+        searches.len(),
+        ms(searches.iter().min().unwrap()),
+        ms(searches.iter().max().unwrap()),
+    );
+}

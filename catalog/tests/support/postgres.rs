@@ -108,6 +108,38 @@ impl PgServer {
         self.run("pg_ctl", &["-D", &data, "-m", "immediate", "-w", "stop"]);
     }
 
+    /// Freezes every process of the server (SIGSTOP), as a paused VM would: connections stay
+    /// open and the kernel still acknowledges what is sent, but nothing answers.
+    pub fn freeze(&self) {
+        self.signal("STOP");
+    }
+
+    /// Lets a frozen server run on (SIGCONT).
+    pub fn thaw(&self) {
+        self.signal("CONT");
+    }
+
+    /// Sends `signal` to the postmaster and every process it started.
+    fn signal(&self, signal: &str) {
+        let pid_file = self.dir.path().join("data/postmaster.pid");
+        let Some(pid) = std::fs::read_to_string(&pid_file)
+            .ok()
+            .and_then(|s| s.lines().next().map(str::to_owned))
+        else {
+            return; // not running
+        };
+        for (tool, args) in [
+            ("pkill", ["-P", pid.as_str()]),
+            ("kill", ["--", pid.as_str()]),
+        ] {
+            Command::new(tool)
+                .arg(format!("-{signal}"))
+                .args(args)
+                .status()
+                .unwrap_or_else(|e| panic!("{tool} -{signal}: {e}"));
+        }
+    }
+
     /// Starts the server again (after [`PgServer::stop_immediately`]) on the same port; it
     /// recovers from its write-ahead log first.
     pub fn start_again(&self) {
@@ -188,6 +220,8 @@ impl PgServer {
 
 impl Drop for PgServer {
     fn drop(&mut self) {
+        // A frozen server would never stop.
+        self.thaw();
         let exe = self.bin.join("pg_ctl");
         let data = self.data();
         let args = ["-D", data.as_str(), "-m", "immediate", "-w", "stop"];

@@ -18,6 +18,12 @@
 //!   inside the later landable polygon on that plane: an answer may pick another of a region's
 //!   near-equal widest circles, metres away, and pick the first again later); its `frames` is
 //!   that count;
+//! - of such a site, only the disk that each of those `min_frames` answers called clear: the
+//!   latest circle shrunk to lie inside the `min_frames - 1` most recent earlier circles of its
+//!   streak that hold its centre (a site with fewer such circles is not admitted yet). A fused
+//!   answer's circle can grow onto what the model mistakes for roof as the map fills in (on one
+//!   fresh revisit set a circle grew 0.4 m in its last two answers, half a metre into a tarp);
+//!   the catalog keeps what the stream agreed on, not its newest guess;
 //! - nothing from a stream before `catalog.min_frames` answers: a look that short neither adds nor
 //!   withdraws.
 //!
@@ -67,14 +73,40 @@ struct Latest {
 }
 
 /// How a site of the stream has been found.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct Streak {
     /// Consecutive answers that found it on resolved ground, this one included.
     run: u32,
     /// Those of them not yet counted in an observation the catalog was sent: a site's `frames`
     /// in the catalog adds each answer once.
     unreported: u32,
+    /// The safe circles of the streak's most recent answers, oldest first, this one's last (at
+    /// most `min_frames +` [`WANDER_ANSWERS`]).
+    circles: Vec<Circle>,
 }
+
+impl Streak {
+    /// The circle the catalog may take: after `min_frames` answers, the disk they
+    /// [`agreed`] on.
+    fn admitted(&self, min_frames: u32) -> Option<Circle> {
+        if self.run < min_frames {
+            return None;
+        }
+        agreed(&self.circles, min_frames)
+    }
+}
+
+/// A safe circle in the map's frame: centre (east, north) and radius, metres.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Circle {
+    center: [f64; 2],
+    radius: f64,
+}
+
+/// How many answers a streak remembers beyond `min_frames`: an answer may pick another of a
+/// region's near-equal widest circles for a while (four answers on seed 6101) and come back; the
+/// circles from before it left still vouch for the one it came back to.
+const WANDER_ANSWERS: usize = 10;
 
 impl Feed {
     pub fn new(catalog: Catalog) -> Self {
@@ -126,7 +158,8 @@ impl Feed {
             self.tracked.clear();
         }
         self.answers = self.answers.saturating_add(1);
-        let sites = streaks(&self.tracked, &out.sites, &evidence.resolved);
+        let history = shared.config.min_frames as usize + WANDER_ANSWERS;
+        let sites = streaks(&self.tracked, &out.sites, &evidence.resolved, history);
         self.tracked = sites.iter().filter(|(_, s)| s.run > 0).cloned().collect();
         self.latest = Some(Latest {
             at: Timestamp::now(),
@@ -157,7 +190,7 @@ impl Feed {
         );
         // What was admitted is reported: the next observation counts only newer answers.
         for (_, streak) in &mut self.tracked {
-            if streak.run >= min_frames {
+            if streak.admitted(min_frames).is_some() {
                 streak.unreported = 0;
             }
         }
@@ -181,8 +214,14 @@ impl Drop for Feed {
 
 /// The streaks of an answer's `sites` (`resolved`: per site, whether it lies on resolved ground)
 /// given the previous answer's `tracked` sites: a site on resolved ground continues the longest
-/// streak of a tracked site it [`continues`]; any other starts at 0.
-fn streaks(tracked: &[(Site, Streak)], sites: &[Site], resolved: &[bool]) -> Vec<(Site, Streak)> {
+/// streak of a tracked site it [`continues`], remembering at most `history` circles; any other
+/// starts at 0.
+fn streaks(
+    tracked: &[(Site, Streak)],
+    sites: &[Site],
+    resolved: &[bool],
+    history: usize,
+) -> Vec<(Site, Streak)> {
     sites
         .iter()
         .zip(resolved)
@@ -193,16 +232,42 @@ fn streaks(tracked: &[(Site, Streak)], sites: &[Site], resolved: &[bool]) -> Vec
             let before = tracked
                 .iter()
                 .filter(|(t, _)| continues(t, site))
-                .map(|(_, streak)| *streak)
-                .max_by_key(|streak| streak.run)
-                .unwrap_or_default();
+                .map(|(_, streak)| streak)
+                .max_by_key(|streak| streak.run);
+            let mut circles = before.map(|b| b.circles.clone()).unwrap_or_default();
+            circles.push(Circle {
+                center: [site.center[0], site.center[1]],
+                radius: site.safe_radius_m,
+            });
+            let excess = circles.len().saturating_sub(history);
+            circles.drain(..excess);
             let streak = Streak {
-                run: before.run + 1,
-                unreported: before.unreported + 1,
+                run: before.map_or(0, |b| b.run) + 1,
+                unreported: before.map_or(0, |b| b.unreported) + 1,
+                circles,
             };
             (site.clone(), streak)
         })
         .collect()
+}
+
+/// The disk `min_frames` answers of the streak all called clear: the latest circle shrunk to lie
+/// inside each of the `min_frames - 1` most recent earlier circles that hold its centre; `None`
+/// when the streak remembers fewer of them.
+fn agreed(circles: &[Circle], min_frames: u32) -> Option<Circle> {
+    let (&latest, earlier) = circles.split_last()?;
+    let holding = earlier.iter().rev().filter_map(|c| {
+        let d = (c.center[0] - latest.center[0]).hypot(c.center[1] - latest.center[1]);
+        (d < c.radius).then_some(c.radius - d)
+    });
+    let needed = min_frames.saturating_sub(1) as usize;
+    let mut radius = latest.radius;
+    let mut found = 0;
+    for room in holding.take(needed) {
+        radius = radius.min(room);
+        found += 1;
+    }
+    (found == needed).then_some(Circle { radius, ..latest })
 }
 
 /// Whether `new` finds again the landable region where the previous answer found `old`: the
@@ -225,15 +290,15 @@ fn continues(old: &Site, new: &Site) -> bool {
         || (region.shell.len() >= 3 && region.signed_distance([old.center[0], old.center[1]]) > 0.0)
 }
 
-/// The observation of `latest`: its sites found by at least `min_frames` consecutive answers
-/// (valid in WGS-84) and its seen area less the squares wholly inside the circles of sites not
-/// admitted yet.
+/// The observation of `latest`: its [admitted](Streak::admitted) sites (valid in WGS-84) and its
+/// seen area less the squares wholly inside the circles of sites on resolved ground not admitted
+/// yet.
 fn observation(latest: &Latest, min_frames: u32, approach_id: &str, model_id: &str) -> Observation {
     let origin = latest.evidence.origin;
     let pending: Vec<&Site> = latest
         .sites
         .iter()
-        .filter(|(_, s)| s.run > 0 && s.run < min_frames)
+        .filter(|(_, s)| s.run > 0 && s.admitted(min_frames).is_none())
         .map(|(s, _)| s)
         .collect();
     let squares = latest
@@ -260,8 +325,14 @@ fn observation(latest: &Latest, min_frames: u32, approach_id: &str, model_id: &s
     let sites = latest
         .sites
         .iter()
-        .filter(|(_, s)| s.run >= min_frames)
-        .map(|(site, s)| observed(origin, site, s.unreported.max(1)))
+        .filter_map(|(site, s)| {
+            let circle = s.admitted(min_frames)?;
+            let site = Site {
+                safe_radius_m: circle.radius,
+                ..site.clone()
+            };
+            Some(observed(origin, &site, s.unreported.max(1)))
+        })
         .filter(|s| {
             let alone = Observation {
                 sites: vec![s.clone()],
@@ -351,15 +422,71 @@ mod tests {
         }
     }
 
-    /// The runs of `answers` (each one site on resolved ground) fed in order.
-    fn runs(answers: &[Site]) -> Vec<u32> {
+    /// The streaks of `answers` (each one site on resolved ground) fed in order.
+    fn fed(answers: &[Site]) -> Vec<Streak> {
         let mut tracked: Vec<(Site, Streak)> = Vec::new();
         let mut out = Vec::new();
         for a in answers {
-            tracked = streaks(&tracked, std::slice::from_ref(a), &[true]);
-            out.push(tracked[0].1.run);
+            tracked = streaks(
+                &tracked,
+                std::slice::from_ref(a),
+                &[true],
+                3 + WANDER_ANSWERS,
+            );
+            out.push(tracked[0].1.clone());
         }
         out
+    }
+
+    fn runs(answers: &[Site]) -> Vec<u32> {
+        fed(answers).iter().map(|s| s.run).collect()
+    }
+
+    /// The radius the catalog takes after `answers`, with `min_frames` 3.
+    fn admitted_radius(answers: &[Site]) -> Option<f64> {
+        let last = fed(answers).pop()?;
+        last.admitted(3).map(|c| c.radius)
+    }
+
+    /// Seed 7301 with realistic pose noise, building 31 at visit 0: the fused answers' circle on
+    /// the target roof grew from 4.08 m to 4.48 m in the last two answers, 0.53 m into a tarp the
+    /// model called roof, and the catalog took the last answer's circle. It takes the disk the
+    /// last three answers agree on, inside the 4.23 m circle 0.4 m away.
+    #[test]
+    fn the_catalog_takes_the_disk_the_last_answers_agree_on_not_the_newest_guess() {
+        let roof = [120.0, 33.0, 139.0, 50.0];
+        let answers = [
+            site(roof, [129.5, 41.3], 4.08, 31.5),
+            site(roof, [129.3, 41.5], 4.23, 31.5),
+            site(roof, [129.3, 41.9], 4.48, 31.5),
+            site(roof, [129.3, 41.9], 4.48, 31.5),
+        ];
+        let radius = admitted_radius(&answers).unwrap();
+        assert!((radius - 3.83).abs() < 1e-9, "{radius}");
+        // Answers that agree give the whole circle; two answers are not enough.
+        let steady = [answers[0].clone(), answers[0].clone(), answers[0].clone()];
+        assert_eq!(admitted_radius(&steady), Some(4.08));
+        assert_eq!(admitted_radius(&steady[..2]), None);
+    }
+
+    #[test]
+    fn a_circle_that_no_earlier_circle_holds_is_not_admitted_until_the_answers_settle() {
+        let roof = [163.0, 245.0, 167.0, 255.0];
+        let north = site(roof, [165.0, 252.7], 1.8, 28.0);
+        let south = site(roof, [165.2, 246.8], 1.9, 28.0);
+        // Streak of 3, but the north circle holds the south centre of none before it.
+        let jumped = [south.clone(), south.clone(), north.clone()];
+        assert_eq!(runs(&jumped), [1, 2, 3]);
+        assert_eq!(admitted_radius(&jumped), None);
+        // The circles from before the answer wandered still vouch for the one it came back to.
+        let back = [
+            north.clone(),
+            north.clone(),
+            south.clone(),
+            south.clone(),
+            north,
+        ];
+        assert_eq!(admitted_radius(&back), Some(1.8));
     }
 
     /// Seed 6101, building 63 of world 6102 at visit 2: a 4 x 12 m roof whose widest circles lie
@@ -385,10 +512,10 @@ mod tests {
         let above = site([0.0, 0.0, 4.0, 12.0], [2.0, 9.0], 1.8, 31.0);
         assert_eq!(runs(&[roof.clone(), roof.clone(), above]), [1, 2, 1]);
         // Not on resolved ground: no streak, and the next answer starts again.
-        let tracked = streaks(&[], std::slice::from_ref(&roof), &[true]);
-        let off = streaks(&tracked, std::slice::from_ref(&roof), &[false]);
+        let tracked = streaks(&[], std::slice::from_ref(&roof), &[true], 13);
+        let off = streaks(&tracked, std::slice::from_ref(&roof), &[false], 13);
         assert_eq!(off[0].1.run, 0);
-        let again = streaks(&off[..0], std::slice::from_ref(&roof), &[true]);
+        let again = streaks(&off[..0], std::slice::from_ref(&roof), &[true], 13);
         assert_eq!(again[0].1.run, 1);
     }
 }
