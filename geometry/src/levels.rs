@@ -327,6 +327,43 @@ mod tests {
         assert!(found.iter().any(|s| (s.0 - 20.0).abs() < 0.1), "{found:?}");
     }
 
+    /// The lowest level of a scan that shows mostly roofs is a lower roof's (the street is under
+    /// [`LOW_QUANTILE`] of the points): points classed ground far below that level are not a
+    /// street at it, so the lower roof stays. (The count once took every ground point less than
+    /// [`STREET_LEVEL_M`] above the level, those far below included, and dropped such roofs.)
+    #[test]
+    fn ground_far_below_the_lowest_level_is_no_street_at_it() {
+        let mut cloud = (Vec::new(), Vec::new());
+        grid([0.0, 0.0, 12.0, 12.0], 10.0, ROOF, |_, _| false, &mut cloud);
+        grid(
+            [14.0, 0.0, 34.0, 20.0],
+            20.0,
+            ROOF,
+            |_, _| false,
+            &mut cloud,
+        );
+        grid(
+            [13.0, -3.0, 16.0, -1.0],
+            0.0,
+            GROUND,
+            |_, _| false,
+            &mut cloud,
+        );
+        let (points, classes) = (&cloud.0, &cloud.1);
+        let street = classes.iter().filter(|&&c| c == GROUND).count();
+        assert!(
+            street >= MIN_GROUND_POINTS && (street as f64) < LOW_QUANTILE * points.len() as f64
+        );
+        let pts: Vec<[f64; 3]> = points.iter().map(|p| p.map(f64::from)).collect();
+        let (regions, polygons) = regions_of(&pts, classes);
+        let lower = (regions.regions.iter())
+            .position(|r| (r.mean[2] - 10.0).abs() < 0.1)
+            .expect("the lower roof's region");
+        let ground = ground_points(&pts, classes);
+        assert!(!is_street_level(&regions, &polygons, lower, &pts, &ground));
+        assert!(sites(&cloud).iter().any(|s| (s.0 - 10.0).abs() < 0.1));
+    }
+
     /// The regions and polygons `detect` finds in `pts`.
     fn regions_of(pts: &[[f64; 3]], classes: &[u8]) -> (Regions, Vec<Polygon>) {
         let tri = crate::triangulation::triangulate(pts).unwrap();
