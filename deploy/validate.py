@@ -138,6 +138,7 @@ CONTRACT: dict[str, dict[str, type | tuple[type, ...]]] = {
         "retention_s": (int, float),
         "expire_interval_s": (int, float),
         "retry_interval_s": (int, float),
+        "search_timeout_s": (int, float),
     },
 }
 ENUMS = {
