@@ -71,66 +71,77 @@ pub fn read_candidates(text: &str) -> Result<Vec<Candidate>> {
     };
     let mut out = Vec::new();
     for (field, f) in features {
-        let props = f.get("properties").and_then(Value::as_object);
-        let height = find_number(props, &HEIGHT_PROPERTIES, &field)?.ok_or_else(|| {
-            Error::invalid(
-                format!("{field}.properties.height"),
-                format!(
-                    "no roof height: expected one of {}",
-                    HEIGHT_PROPERTIES.join(", ")
-                ),
-            )
-        })?;
-        let ground = find_number(props, &GROUND_PROPERTIES, &field)?.unwrap_or(0.0);
-        let id = f
-            .get("id")
-            .or_else(|| props.and_then(|p| p.get("id")))
-            .and_then(|v| match v {
-                Value::String(s) => Some(s.clone()),
-                Value::Number(n) => Some(n.to_string()),
-                _ => None,
-            });
-        let geometry = f
-            .get("geometry")
-            .ok_or_else(|| Error::invalid(format!("{field}.geometry"), "missing"))?;
-        let gfield = format!("{field}.geometry");
-        let polygons = match geometry.get("type").and_then(Value::as_str) {
-            Some("Polygon") => vec![polygon_from_coordinates(
-                geometry.get("coordinates").unwrap_or(&Value::Null),
-                &format!("{gfield}.coordinates"),
-            )?],
-            Some("MultiPolygon") => geometry
-                .get("coordinates")
-                .and_then(Value::as_array)
-                .ok_or_else(|| Error::invalid(format!("{gfield}.coordinates"), "not an array"))?
-                .iter()
-                .enumerate()
-                .map(|(i, c)| polygon_from_coordinates(c, &format!("{gfield}.coordinates[{i}]")))
-                .collect::<Result<Vec<_>>>()?,
-            other => {
-                return Err(Error::invalid(
-                    format!("{gfield}.type"),
-                    format!("{other:?}: a footprint is a Polygon or MultiPolygon"),
-                ));
-            }
-        };
-        let parts = polygons.len();
-        for (i, footprint) in polygons.into_iter().enumerate() {
-            let source_id = match (&id, parts) {
-                (Some(id), 1) => Some(id.clone()),
-                (Some(id), _) => Some(format!("{id}#{i}")),
-                (None, _) => None,
-            };
-            let c = Candidate {
-                footprint,
-                roof_height_m: ground + height,
-                source_id,
-            };
-            c.validate(&field)?;
-            out.push(c);
-        }
+        out.extend(feature_candidates(f, &field)?);
     }
     Ok(out)
+}
+
+/// The candidates of one feature (`field` names it): one per polygon of its footprint, at its
+/// roof height above the ellipsoid, with its id (`id#i` for the parts of a multipolygon).
+fn feature_candidates(f: &Value, field: &str) -> Result<Vec<Candidate>> {
+    let props = f.get("properties").and_then(Value::as_object);
+    let height = find_number(props, &HEIGHT_PROPERTIES, field)?.ok_or_else(|| {
+        Error::invalid(
+            format!("{field}.properties.height"),
+            format!(
+                "no roof height: expected one of {}",
+                HEIGHT_PROPERTIES.join(", ")
+            ),
+        )
+    })?;
+    let ground = find_number(props, &GROUND_PROPERTIES, field)?.unwrap_or(0.0);
+    let id = f
+        .get("id")
+        .or_else(|| props.and_then(|p| p.get("id")))
+        .and_then(|v| match v {
+            Value::String(s) => Some(s.clone()),
+            Value::Number(n) => Some(n.to_string()),
+            _ => None,
+        });
+    let polygons = footprints(f, field)?;
+    let parts = polygons.len();
+    let mut out = Vec::with_capacity(parts);
+    for (i, footprint) in polygons.into_iter().enumerate() {
+        let source_id = match (&id, parts) {
+            (Some(id), 1) => Some(id.clone()),
+            (Some(id), _) => Some(format!("{id}#{i}")),
+            (None, _) => None,
+        };
+        let c = Candidate {
+            footprint,
+            roof_height_m: ground + height,
+            source_id,
+        };
+        c.validate(field)?;
+        out.push(c);
+    }
+    Ok(out)
+}
+
+/// The polygons of a feature's `Polygon` or `MultiPolygon` geometry.
+fn footprints(f: &Value, field: &str) -> Result<Vec<Polygon>> {
+    let geometry = f
+        .get("geometry")
+        .ok_or_else(|| Error::invalid(format!("{field}.geometry"), "missing"))?;
+    let gfield = format!("{field}.geometry");
+    match geometry.get("type").and_then(Value::as_str) {
+        Some("Polygon") => Ok(vec![polygon_from_coordinates(
+            geometry.get("coordinates").unwrap_or(&Value::Null),
+            &format!("{gfield}.coordinates"),
+        )?]),
+        Some("MultiPolygon") => geometry
+            .get("coordinates")
+            .and_then(Value::as_array)
+            .ok_or_else(|| Error::invalid(format!("{gfield}.coordinates"), "not an array"))?
+            .iter()
+            .enumerate()
+            .map(|(i, c)| polygon_from_coordinates(c, &format!("{gfield}.coordinates[{i}]")))
+            .collect(),
+        other => Err(Error::invalid(
+            format!("{gfield}.type"),
+            format!("{other:?}: a footprint is a Polygon or MultiPolygon"),
+        )),
+    }
 }
 
 /// Search results as a GeoJSON `FeatureCollection` (see the module docs).
