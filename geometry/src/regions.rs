@@ -93,7 +93,7 @@ pub fn extract_regions<P: Xyz>(
     let mut regions = Vec::new();
     let mut queue: Vec<u32> = Vec::new();
     // Per point: the label of the last region that counted it.
-    let mut stamp = vec![EMPTY; points.len()];
+    let mut stamp = vec![0u8; points.len()];
     for seed in 0..n {
         if !open[seed] {
             continue;
@@ -158,8 +158,13 @@ fn plane<P: Xyz>(
     points: &[P],
     triangles: Vec<u32>,
     (label, labels): (u32, &mut [u32]),
-    stamp: &mut [u32],
+    stamp: &mut [u8],
 ) -> Region {
+    // One byte a point: the regions take turns at the marks 1 to 255, cleared between rounds.
+    let mark = (label % 255) as u8 + 1;
+    if mark == 1 && label > 0 {
+        stamp.fill(0);
+    }
     let (mut sum, mut normal, mut count) = ([0.0f64; 3], [0.0f64; 3], 0usize);
     // The corners of a few triangles are read first, with no branch between the loads, so that
     // their cache misses overlap; then they are summed in order.
@@ -176,8 +181,8 @@ fn plane<P: Xyz>(
         }
         for (v, &[a, b, c]) in vertices.iter().zip(&corners[..chunk.len()]) {
             for (&i, p) in v.iter().zip([a, b, c]) {
-                if stamp[i as usize] != label {
-                    stamp[i as usize] = label;
+                if stamp[i as usize] != mark {
+                    stamp[i as usize] = mark;
                     sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
                     count += 1;
                 }
