@@ -421,6 +421,31 @@ mod tests {
     }
 
     #[test]
+    fn the_256th_region_counts_a_point_it_shares_with_the_first() {
+        // 256 lone triangles (no neighbours), each a region of its own; the first and the last
+        // share point 0, the others have their own points. The last takes the first one's mark
+        // again (one byte a point), so the marks must have been cleared in between.
+        let mut triangles = Vec::new();
+        for k in 0..256u32 {
+            let base = 1 + 3 * k;
+            let first = if k == 0 || k == 255 { 0 } else { base };
+            triangles.extend([first, base + 1, base + 2]);
+        }
+        let pts: Vec<[f64; 3]> = (0..1 + 3 * 256)
+            .map(|i| [f64::from(i), f64::from(i % 3), 0.0])
+            .collect();
+        let tri = Triangulation {
+            halfedges: vec![EMPTY; triangles.len()],
+            triangles,
+        };
+        let keep = vec![true; tri.len()];
+        let r = extract_regions(&tri, &pts, keep, &RegionParams { min_triangles: 1 }).unwrap();
+        assert_eq!(r.regions.len(), 256);
+        assert!(r.regions.iter().all(|g| g.point_count == 3));
+        assert_eq!(r.regions[255].mean[0], (0.0 + 767.0 + 768.0) / 3.0);
+    }
+
+    #[test]
     fn a_removed_column_splits_a_grid_into_two_regions() {
         let mut pts = Vec::new();
         for y in 0..5 {
