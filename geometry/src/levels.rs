@@ -22,6 +22,8 @@
 //! Both judge from heights, areas and classes alone, so they apply to a scan and to a fused map
 //! alike.
 
+use std::cmp::Ordering;
+
 use crate::regions::Regions;
 use crate::{Polygon, SemanticClass};
 
@@ -150,8 +152,10 @@ fn street_level<'g>(
     // A street has a region at least as large above it: `o.mean[2] - low >=
     // MIN_ROOF_ABOVE_GROUND_M` and `z - low < STREET_LEVEL_M` need `o.mean[2] > z` (subtraction
     // rounds monotonically), so without such a region the level is not needed (a roof's).
-    let higher =
-        (regions.regions.iter().zip(polygons)).any(|(o, p)| !(o.mean[2] <= z) && p.area() >= area);
+    let higher_or_nan =
+        |h: f64| !matches!(h.partial_cmp(&z), Some(Ordering::Less | Ordering::Equal));
+    let higher = (regions.regions.iter().zip(polygons))
+        .any(|(o, p)| higher_or_nan(o.mean[2]) && p.area() >= area);
     if !higher {
         return false;
     }
