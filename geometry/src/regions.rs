@@ -92,7 +92,7 @@ pub fn extract_regions<P: Xyz>(
     let mut labels = vec![EMPTY; n];
     let mut regions = Vec::new();
     let mut queue: Vec<u32> = Vec::new();
-    // Per point: the label of the last region that counted it.
+    // Per point: the mark of the last region that counted it ([`plane`]).
     let mut stamp = vec![0u8; points.len()];
     for seed in 0..n {
         if !open[seed] {
@@ -123,7 +123,7 @@ fn grow(tri: &Triangulation, open: &mut [bool], seed: u32, queue: &mut Vec<u32>)
     queue.clear();
     queue.push(seed);
     // Every triangle is pushed once, so the head index bounds the loop by the triangle count.
-    // The neighbours of the next few triangles are read first, with no branch between the loads.
+    // The neighbours of a chunk of triangles are read first, then followed in order.
     let mut head = 0;
     let mut twins = [[EMPTY; 3]; CHUNK];
     while head < queue.len() {
@@ -147,12 +147,14 @@ fn grow(tri: &Triangulation, open: &mut [bool], seed: u32, queue: &mut Vec<u32>)
     }
 }
 
-/// Triangles whose corners [`plane`] reads ahead of summing them.
+/// Triangles whose neighbours ([`grow`]) or corners ([`plane`]) are read in one loop with no
+/// branch between the loads, so that their cache misses (the walk's order is not the mesh's,
+/// nor the mesh's the points') overlap.
 const CHUNK: usize = 64;
 
-/// The region of `triangles` (in growth order), labelled `label`: the mean of its distinct
-/// points and its area-weighted normal, summed in growth order. `stamp` marks the points
-/// already counted.
+/// The region of `triangles` (in growth order), labelled `label` in `labels`: the mean of its
+/// distinct points and its area-weighted normal, summed in growth order. `stamp` marks the
+/// points already counted.
 fn plane<P: Xyz>(
     tri: &Triangulation,
     points: &[P],
@@ -166,8 +168,7 @@ fn plane<P: Xyz>(
         stamp.fill(0);
     }
     let (mut sum, mut normal, mut count) = ([0.0f64; 3], [0.0f64; 3], 0usize);
-    // The corners of a few triangles are read first, with no branch between the loads, so that
-    // their cache misses overlap; then they are summed in order.
+    // The corners of a chunk of triangles are read first, then summed in order.
     let mut corners = [[[0.0f64; 3]; 3]; CHUNK];
     for chunk in triangles.chunks(CHUNK) {
         let mut vertices = [[0u32; 3]; CHUNK];
