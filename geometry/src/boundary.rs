@@ -84,11 +84,10 @@ fn traced(
     if grow {
         scratch.member.resize(points.len(), false);
     }
-    regions
-        .regions
-        .iter()
+    let edges = boundary_edges(tri, regions);
+    (regions.regions.iter().zip(&edges))
         .enumerate()
-        .map(|(r, region)| {
+        .map(|(r, (region, edges))| {
             let midpoints = grow.then_some(Midpoints {
                 labels: &regions.labels,
                 max_edge_m: midpoint_max_edge_m,
@@ -96,14 +95,33 @@ fn traced(
             region_polygon(
                 tri,
                 points,
-                &regions.labels,
-                r as u32,
-                &region.triangles,
+                (r as u32, &region.triangles),
+                edges,
                 midpoints,
                 &mut scratch,
             )
         })
         .collect()
+}
+
+/// Each region's boundary half-edges, ascending: those whose opposite is missing or in a
+/// triangle with another label. One pass over the half-edges in their order finds them for every
+/// region (the labels and the regions' triangle lists agree, as [`crate::regions`] leaves them).
+fn boundary_edges(tri: &Triangulation, regions: &Regions) -> Vec<Vec<u32>> {
+    let labels = &regions.labels;
+    let mut edges = vec![Vec::new(); regions.regions.len()];
+    for (t, &label) in labels.iter().enumerate() {
+        if label == EMPTY {
+            continue;
+        }
+        for e in 3 * t..3 * t + 3 {
+            let o = tri.halfedges[e];
+            if o == EMPTY || labels[o as usize / 3] != label {
+                edges[label as usize].push(e as u32);
+            }
+        }
+    }
+    edges
 }
 
 /// Where a region's edges run to midpoints ([`BoundaryParams::midpoint_max_edge_m`]).
@@ -187,7 +205,8 @@ pub fn region_parts(
             }
             let inside = |t: usize| regions.labels[t] == r as u32 && keep(t as u32);
             let kept = region.triangles.iter().copied().filter(|&t| keep(t));
-            let loops = boundary_loops(tri, points, kept, inside, &mut scratch)?;
+            let edges = edges_leaving(tri, kept, inside);
+            let loops = boundary_loops(tri, points, &edges, &mut scratch)?;
             Ok(Some(
                 loops
                     .iter()
@@ -207,17 +226,17 @@ impl Scratch {
     }
 }
 
+/// The polygon of region `label` with `triangles` and boundary half-edges `edges` (ascending),
+/// and through midpoints where `midpoints` says so.
 fn region_polygon(
     tri: &Triangulation,
     points: &[[f64; 3]],
-    labels: &[u32],
-    label: u32,
-    triangles: &[u32],
+    (label, triangles): (u32, &[u32]),
+    edges: &[u32],
     midpoints: Option<Midpoints<'_>>,
     s: &mut Scratch,
 ) -> Result<(Polygon, Option<Polygon>), GeometryError> {
-    let inside = |t: usize| labels[t] == label;
-    let loops = boundary_loops(tri, points, triangles.iter().copied(), inside, s)?;
+    let loops = boundary_loops(tri, points, edges, s)?;
     let own = polygon_of(
         loops
             .iter()
@@ -275,25 +294,35 @@ fn polygon_of(rings: Rings, label: u32) -> Result<Polygon, GeometryError> {
     Ok(Polygon { shell, holes })
 }
 
-/// The loops bounding `triangles`, whose neighbours count as the same set where `inside` says
-/// so: their boundary half-edges walked head to tail.
-fn boundary_loops(
+/// The half-edges of `triangles` whose opposite is missing or in a triangle that `inside`
+/// does not count as one of them, ascending.
+fn edges_leaving(
     tri: &Triangulation,
-    points: &[[f64; 3]],
     triangles: impl Iterator<Item = u32>,
     inside: impl Fn(usize) -> bool,
-    s: &mut Scratch,
-) -> Result<Vec<Vec<u32>>, GeometryError> {
-    s.edges.clear();
+) -> Vec<u32> {
+    let mut edges = Vec::new();
     for t in triangles {
         for e in 3 * t as usize..3 * t as usize + 3 {
             let o = tri.halfedges[e];
             if o == EMPTY || !inside(o as usize / 3) {
-                s.edges.push(e as u32);
+                edges.push(e as u32);
             }
         }
     }
-    s.edges.sort_unstable();
+    edges.sort_unstable();
+    edges
+}
+
+/// The loops of boundary half-edges `edges` (ascending), walked head to tail.
+fn boundary_loops(
+    tri: &Triangulation,
+    points: &[[f64; 3]],
+    edges: &[u32],
+    s: &mut Scratch,
+) -> Result<Vec<Vec<u32>>, GeometryError> {
+    s.edges.clear();
+    s.edges.extend_from_slice(edges);
     let m = s.edges.len();
     s.chain.clear();
     s.chain.resize(m, EMPTY);

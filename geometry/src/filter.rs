@@ -5,8 +5,8 @@
 //! unit normal is steep enough (`|n · k| > min_normal_dot`) or its vertical extent is below `z_min` (the
 //! bypass that keeps sensor noise from punching spurious holes into a flat mesh).
 
-use crate::Params;
 use crate::triangulation::Triangulation;
+use crate::{Params, Xyz};
 
 /// Parameters of [`filter_triangles`]; `Default` gives the paper's values.
 #[derive(Debug, Clone, PartialEq)]
@@ -42,9 +42,9 @@ impl From<&Params> for FilterParams {
 ///
 /// `points` are the triangulated points with their z; `classes`, when given, has one entry per
 /// point (checked by [`crate::detect`]).
-pub fn filter_triangles(
+pub fn filter_triangles<P: Xyz>(
     tri: &Triangulation,
-    points: &[[f64; 3]],
+    points: &[P],
     classes: Option<&[u8]>,
     params: &FilterParams,
 ) -> Vec<bool> {
@@ -68,7 +68,7 @@ pub fn filter_triangles(
             {
                 return false;
             }
-            let (a, b, c) = (points[ia], points[ib], points[ic]);
+            let (a, b, c) = (points[ia].xyz(), points[ib].xyz(), points[ic].xyz());
             let ab = sub(b, a);
             let ac = sub(c, a);
             let bc = sub(c, b);

@@ -22,6 +22,8 @@
 //! Both judge from heights, areas and classes alone, so they apply to a scan and to a fused map
 //! alike.
 
+use std::cmp::Ordering;
+
 use crate::regions::Regions;
 use crate::{Polygon, SemanticClass};
 
@@ -71,9 +73,16 @@ pub fn no_roof(
     points: &[[f64; 3]],
     classes: Option<&[u8]>,
 ) -> Vec<bool> {
-    let ground = classes.map_or_else(Vec::new, |c| ground_points(points, c));
+    // Without classes no point is ground, so no region is street. With them, the ground points
+    // are gathered once, and only if a region is low enough to be street.
+    let ground = std::cell::OnceCell::new();
+    let ground = || {
+        let all =
+            ground.get_or_init(|| classes.map_or_else(Vec::new, |c| ground_points(points, c)));
+        all.as_slice()
+    };
     let mut drop: Vec<bool> = (0..regions.regions.len())
-        .map(|r| is_street_level(regions, polygons, r, points, &ground))
+        .map(|r| classes.is_some() && street_level(regions, polygons, r, points, ground))
         .collect();
     let platforms: Vec<bool> = (0..regions.regions.len())
         .map(|r| !drop[r] && is_raised_platform(regions, polygons, r, &drop))
@@ -126,22 +135,48 @@ pub fn is_street_level(
     points: &[[f64; 3]],
     ground: &[[f64; 3]],
 ) -> bool {
+    street_level(regions, polygons, r, points, || ground)
+}
+
+/// [`is_street_level`], with the ground points asked for only when the region's height and the
+/// other regions leave the answer to them.
+fn street_level<'g>(
+    regions: &Regions,
+    polygons: &[Polygon],
+    r: usize,
+    points: &[[f64; 3]],
+    ground: impl FnOnce() -> &'g [[f64; 3]],
+) -> bool {
     let [cx, cy, z] = regions.regions[r].mean;
+    let area = polygons[r].area();
+    // A street has a region at least as large above it: `o.mean[2] - low >=
+    // MIN_ROOF_ABOVE_GROUND_M` and `z - low < STREET_LEVEL_M` need `o.mean[2] > z` (subtraction
+    // rounds monotonically), so without such a region the level is not needed (a roof's).
+    let higher_or_nan =
+        |h: f64| !matches!(h.partial_cmp(&z), Some(Ordering::Less | Ordering::Equal));
+    let higher = (regions.regions.iter().zip(polygons))
+        .any(|(o, p)| higher_or_nan(o.mean[2]) && p.area() >= area);
+    if !higher {
+        return false;
+    }
     let Some(low) = lowest_level(points, [cx, cy]) else {
         return false;
     };
+    let low_enough = z - low < STREET_LEVEL_M;
+    if !low_enough
+        || !(regions.regions.iter().zip(polygons))
+            .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
+    {
+        return false;
+    }
     let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
-    let on_street = (ground.iter())
+    let on_street = (ground().iter())
         .filter(|p| {
             (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2
                 && (p[2] - low).abs() < STREET_LEVEL_M
         })
         .count();
-    let area = polygons[r].area();
-    z - low < STREET_LEVEL_M
-        && on_street >= MIN_GROUND_POINTS
-        && (regions.regions.iter().zip(polygons))
-            .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
+    on_street >= MIN_GROUND_POINTS
 }
 
 /// The lowest level of the points within [`STREET_RADIUS_M`] of `at`: the

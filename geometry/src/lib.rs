@@ -63,6 +63,27 @@ pub use polylabel::Disk;
 pub use ranking::{KeepClear, KeepOut};
 pub use triangulation::Triangulation;
 
+/// A point's x, y, z as the geometry computes with them: `[f64; 3]`, or a cloud's `[f32; 3]`
+/// widened as it is read (exactly, so the answers are the same), which halves the memory that
+/// the steps after the triangulation read in the mesh's order rather than the points'.
+pub trait Xyz: Copy {
+    fn xyz(self) -> [f64; 3];
+}
+
+impl Xyz for [f64; 3] {
+    #[inline]
+    fn xyz(self) -> [f64; 3] {
+        self
+    }
+}
+
+impl Xyz for [f32; 3] {
+    #[inline]
+    fn xyz(self) -> [f64; 3] {
+        self.map(f64::from)
+    }
+}
+
 /// Largest accepted absolute coordinate, metres. Beyond it f32 input has less than a metre of
 /// resolution and the result would be meaningless.
 pub const MAX_ABS_COORDINATE_M: f64 = 1e7;
@@ -350,14 +371,14 @@ pub fn detect(cloud: &Cloud<'_>, params: &Params) -> Result<Detection, GeometryE
 
     let mask = filter::filter_triangles(
         tri,
-        &pts,
+        cloud.points,
         cloud.classes,
         &filter::FilterParams::from(params),
     );
     let t2 = Instant::now();
     timings.triangle_filter = t2 - t1;
 
-    let mut regions = planar_regions(tri, &pts, mask, params, cloud.kind)?;
+    let mut regions = planar_regions(tri, cloud.points, &pts, mask, params, cloud.kind)?;
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 
@@ -407,9 +428,11 @@ fn check_triangulation(
     Ok(tri)
 }
 
-/// The paper's Algorithm 2 on the kept triangles, with a fused map's pinholes closed.
+/// The paper's Algorithm 2 on the kept triangles, with a fused map's pinholes closed; `points`
+/// are the cloud's, `pts` the same widened.
 fn planar_regions(
     tri: &Triangulation,
+    points: &[[f32; 3]],
     pts: &[[f64; 3]],
     mask: Vec<bool>,
     params: &Params,
@@ -417,7 +440,7 @@ fn planar_regions(
 ) -> Result<regions::Regions, GeometryError> {
     let mut regions = regions::extract_regions(
         tri,
-        pts,
+        points,
         mask,
         &regions::RegionParams {
             min_triangles: params.min_region_triangles,

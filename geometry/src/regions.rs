@@ -2,12 +2,13 @@
 //!
 //! Entry point: [`extract_regions`]. Seeds are taken in triangle order (not at random, so results
 //! are reproducible); each region grows breadth-first through edge-adjacent kept triangles. The
-//! plane statistics (mean of the distinct points, area-weighted normal) are gathered during the
-//! same pass, while the triangle's points are in cache.
+//! plane statistics (mean of the distinct points, area-weighted normal) are then summed over the
+//! region's triangles in that order: the walk, free of the points' loads, runs ahead, and the
+//! sums' loads, whose addresses are all known, overlap.
 
-use crate::GeometryError;
 use crate::filter::{cross, norm2, sub};
 use crate::triangulation::{EMPTY, Triangulation, next_halfedge};
+use crate::{GeometryError, Xyz};
 
 /// Parameters of [`extract_regions`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -74,9 +75,9 @@ impl Regions {
 
 /// Grows regions over the triangles whose `keep` flag is set (one flag per triangle); `points` are
 /// the triangulated points with their z.
-pub fn extract_regions(
+pub fn extract_regions<P: Xyz>(
     tri: &Triangulation,
-    points: &[[f64; 3]],
+    points: &[P],
     keep: Vec<bool>,
     params: &RegionParams,
 ) -> Result<Regions, GeometryError> {
@@ -91,71 +92,119 @@ pub fn extract_regions(
     let mut labels = vec![EMPTY; n];
     let mut regions = Vec::new();
     let mut queue: Vec<u32> = Vec::new();
-    // Per point: the seed of the last region that counted it.
-    let mut stamp = vec![EMPTY; points.len()];
+    // Per point: the mark of the last region that counted it ([`plane`]).
+    let mut stamp = vec![0u8; points.len()];
     for seed in 0..n {
         if !open[seed] {
             continue;
         }
-        open[seed] = false;
-        queue.clear();
-        queue.push(seed as u32);
-        let (mut sum, mut normal, mut count) = ([0.0f64; 3], [0.0f64; 3], 0usize);
-        // `queue` doubles as the region: every triangle is pushed once, so the head index bounds
-        // the loop by the triangle count.
-        let mut head = 0;
-        while head < queue.len() {
-            let t = queue[head] as usize;
-            head += 1;
-            let v = &tri.triangles[3 * t..3 * t + 3];
-            for &i in v {
-                if stamp[i as usize] != seed as u32 {
-                    stamp[i as usize] = seed as u32;
-                    let p = points[i as usize];
+        grow(tri, &mut open, seed as u32, &mut queue);
+        if queue.len() >= params.min_triangles.max(1) {
+            let label = regions.len() as u32;
+            let triangles = std::mem::take(&mut queue);
+            regions.push(plane(
+                tri,
+                points,
+                triangles,
+                (label, &mut labels),
+                &mut stamp,
+            ));
+        }
+    }
+    Ok(Regions { regions, labels })
+}
+
+/// Fills `queue` with the region grown breadth-first from `seed` over the `open` triangles,
+/// closing them. The walk reads only the mesh's adjacency and the flags, so it runs ahead of the
+/// plane statistics ([`plane`]), which read the points in its order. It has no branch on whether
+/// a neighbour is open (one no predictor guesses), only arithmetic.
+fn grow(tri: &Triangulation, open: &mut [bool], seed: u32, queue: &mut Vec<u32>) {
+    open[seed as usize] = false;
+    queue.clear();
+    queue.push(seed);
+    // Every triangle is pushed once, so the head index bounds the loop by the triangle count.
+    // The neighbours of a chunk of triangles are read first, then followed in order.
+    let mut head = 0;
+    let mut twins = [[EMPTY; 3]; CHUNK];
+    while head < queue.len() {
+        let ahead = &queue[head..queue.len().min(head + CHUNK)];
+        for (twin, &t) in twins.iter_mut().zip(ahead) {
+            let e = 3 * t as usize;
+            *twin = [tri.halfedges[e], tri.halfedges[e + 1], tri.halfedges[e + 2]];
+        }
+        let len = ahead.len();
+        head += len;
+        for &o in twins[..len].iter().flatten() {
+            if o != EMPTY {
+                let nt = o as usize / 3;
+                let was_open = open[nt];
+                open[nt] = false;
+                // Pushed, and popped again unless it was open.
+                queue.push(nt as u32);
+                queue.truncate(queue.len() - usize::from(!was_open));
+            }
+        }
+    }
+}
+
+/// Triangles whose neighbours ([`grow`]) or corners ([`plane`]) are read in one loop with no
+/// branch between the loads, so that their cache misses (the walk's order is not the mesh's,
+/// nor the mesh's the points') overlap.
+const CHUNK: usize = 64;
+
+/// The region of `triangles` (in growth order), labelled `label` in `labels`: the mean of its
+/// distinct points and its area-weighted normal, summed in growth order. `stamp` marks the
+/// points already counted.
+fn plane<P: Xyz>(
+    tri: &Triangulation,
+    points: &[P],
+    triangles: Vec<u32>,
+    (label, labels): (u32, &mut [u32]),
+    stamp: &mut [u8],
+) -> Region {
+    // One byte a point: the regions take turns at the marks 1 to 255, cleared between rounds.
+    let mark = (label % 255) as u8 + 1;
+    if mark == 1 && label > 0 {
+        stamp.fill(0);
+    }
+    let (mut sum, mut normal, mut count) = ([0.0f64; 3], [0.0f64; 3], 0usize);
+    // The corners of a chunk of triangles are read first, then summed in order.
+    let mut corners = [[[0.0f64; 3]; 3]; CHUNK];
+    for chunk in triangles.chunks(CHUNK) {
+        let mut vertices = [[0u32; 3]; CHUNK];
+        for (v, &t) in vertices.iter_mut().zip(chunk) {
+            labels[t as usize] = label;
+            let t = 3 * t as usize;
+            *v = [tri.triangles[t], tri.triangles[t + 1], tri.triangles[t + 2]];
+        }
+        for (c, v) in corners.iter_mut().zip(&vertices[..chunk.len()]) {
+            *c = v.map(|i| points[i as usize].xyz());
+        }
+        for (v, &[a, b, c]) in vertices.iter().zip(&corners[..chunk.len()]) {
+            for (&i, p) in v.iter().zip([a, b, c]) {
+                if stamp[i as usize] != mark {
+                    stamp[i as usize] = mark;
                     sum = [sum[0] + p[0], sum[1] + p[1], sum[2] + p[2]];
                     count += 1;
                 }
             }
-            let (a, b, c) = (
-                points[v[0] as usize],
-                points[v[1] as usize],
-                points[v[2] as usize],
-            );
             let nt = cross(sub(b, a), sub(c, a));
             normal = [normal[0] + nt[0], normal[1] + nt[1], normal[2] + nt[2]];
-            for e in 3 * t..3 * t + 3 {
-                let o = tri.halfedges[e];
-                if o != EMPTY {
-                    let nt = o as usize / 3;
-                    if open[nt] {
-                        open[nt] = false;
-                        queue.push(nt as u32);
-                    }
-                }
-            }
-        }
-        if queue.len() >= params.min_triangles.max(1) {
-            let label = regions.len() as u32;
-            for &t in &queue {
-                labels[t as usize] = label;
-            }
-            let k = count.max(1) as f64;
-            let len =
-                (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
-            let normal = if len > 0.0 && normal[2] > 0.0 {
-                [normal[0] / len, normal[1] / len, normal[2] / len]
-            } else {
-                [0.0, 0.0, 1.0]
-            };
-            regions.push(Region {
-                triangles: std::mem::take(&mut queue),
-                mean: [sum[0] / k, sum[1] / k, sum[2] / k],
-                normal,
-                point_count: count,
-            });
         }
     }
-    Ok(Regions { regions, labels })
+    let k = count.max(1) as f64;
+    let len = (normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]).sqrt();
+    let normal = if len > 0.0 && normal[2] > 0.0 {
+        [normal[0] / len, normal[1] / len, normal[2] / len]
+    } else {
+        [0.0, 0.0, 1.0]
+    };
+    Region {
+        triangles,
+        mean: [sum[0] / k, sum[1] / k, sum[2] / k],
+        normal,
+        point_count: count,
+    }
 }
 
 /// Most triangles in a pinhole that [`close_pinholes`] closes.
@@ -370,6 +419,31 @@ mod tests {
             };
             assert_eq!(label, expected, "triangle {t}");
         }
+    }
+
+    #[test]
+    fn the_256th_region_counts_a_point_it_shares_with_the_first() {
+        // 256 lone triangles (no neighbours), each a region of its own; the first and the last
+        // share point 0, the others have their own points. The last takes the first one's mark
+        // again (one byte a point), so the marks must have been cleared in between.
+        let mut triangles = Vec::new();
+        for k in 0..256u32 {
+            let base = 1 + 3 * k;
+            let first = if k == 0 || k == 255 { 0 } else { base };
+            triangles.extend([first, base + 1, base + 2]);
+        }
+        let pts: Vec<[f64; 3]> = (0..1 + 3 * 256)
+            .map(|i| [f64::from(i), f64::from(i % 3), 0.0])
+            .collect();
+        let tri = Triangulation {
+            halfedges: vec![EMPTY; triangles.len()],
+            triangles,
+        };
+        let keep = vec![true; tri.len()];
+        let r = extract_regions(&tri, &pts, keep, &RegionParams { min_triangles: 1 }).unwrap();
+        assert_eq!(r.regions.len(), 256);
+        assert!(r.regions.iter().all(|g| g.point_count == 3));
+        assert_eq!(r.regions[255].mean[0], (0.0 + 767.0 + 768.0) / 3.0);
     }
 
     #[test]
