@@ -133,7 +133,8 @@ fn bench(c: &mut Criterion) {
             placed_next,
             |m| {
                 let surface = m.surface([[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]]);
-                let local: Vec<[f32; 3]> = surface.points.iter().map(|p| p.map(|v| v as f32)).collect();
+                let local: Vec<[f32; 3]> =
+                    surface.points.iter().map(|p| p.map(|v| v as f32)).collect();
                 black_box(landing_geometry::triangulate_points(&local))
             },
             criterion::BatchSize::LargeInput,

@@ -326,6 +326,10 @@ fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -
         (!surface.points.is_empty()).then(|| map.origin_for(scan)),
         "the map's coordinates are relative to the frame's origin"
     );
+    #[cfg(debug_assertions)]
+    if let Ok(kept) = &triangulated {
+        check_kept(&local, kept);
+    }
     Surfaced {
         placed,
         surface,
@@ -334,4 +338,19 @@ fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -
         placing,
         triangulation: t.elapsed(),
     }
+}
+
+/// Debug builds (the tests) check every kept triangulation against a fresh one of the same
+/// points: a Delaunay triangulation of them with the same number of triangles.
+#[cfg(debug_assertions)]
+fn check_kept(points: &[[f32; 3]], kept: &Triangulation) {
+    let xy: Vec<[f64; 2]> = points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1])])
+        .collect();
+    if let Err(e) = kept.check_invariants(&xy, true) {
+        panic!("the kept triangulation is no Delaunay triangulation: {e}");
+    }
+    let fresh = landing_geometry::triangulate_points(points).map_or(0, |t| t.len());
+    assert_eq!(kept.len(), fresh, "kept and fresh triangle counts");
 }
