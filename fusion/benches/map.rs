@@ -115,6 +115,38 @@ fn bench(c: &mut Criterion) {
     g.bench_function("triangulation alone", |b| {
         b.iter(|| black_box(triangulate(&wide)))
     });
+    // A fused frame's surface and triangulation, after the 41st scan is placed: read and
+    // triangulated afresh (what a frame did before), and kept from the 40th and repaired.
+    let placed_next = || {
+        let mut m = map_of(40, None);
+        let _ = m.meshed_surface();
+        m.place(&Scan {
+            time_s: 4.0,
+            sensor: SENSOR,
+            points: &next,
+            ..Scan::new("drone")
+        });
+        m
+    };
+    g.bench_function("surface and its triangulation afresh", |b| {
+        b.iter_batched(
+            placed_next,
+            |m| {
+                let surface = m.surface([[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]]);
+                let local: Vec<[f32; 3]> =
+                    surface.points.iter().map(|p| p.map(|v| v as f32)).collect();
+                black_box(landing_geometry::triangulate_points(&local))
+            },
+            criterion::BatchSize::LargeInput,
+        )
+    });
+    g.bench_function("surface and its triangulation kept", |b| {
+        b.iter_batched(
+            placed_next,
+            |mut m| black_box(m.meshed_surface()),
+            criterion::BatchSize::LargeInput,
+        )
+    });
     g.finish();
 }
 

@@ -22,7 +22,10 @@
 //! positions, so the [`FusionMap::surface`] answers take is then final) and
 //! [`FusionMap::vote`] (its classes, view and keep-out footprints), so that a caller can
 //! triangulate the surface while the scan's classes are still being made; [`FusionMap::insert`]
-//! does both.
+//! does both. [`FusionMap::meshed_surface`] gives the surface with its Delaunay triangulation,
+//! both kept between scans and changed only where a scan changed the surface (a scan moves the
+//! means of the cells it hits and adds some at the edge of what was seen; the rest of the map
+//! stays): the triangulation is a `landing_geometry::delaunay::KeptTriangulation`.
 //!
 //! Before a scan is added, [`FusionMap::register`] finds the small rigid correction that lays it
 //! onto the map's planes (a drone's pose is off by centimetres and a tenth of a degree, enough
@@ -65,11 +68,14 @@
 #![forbid(unsafe_code)]
 
 mod register;
+mod surface;
 
 use std::collections::{HashMap, VecDeque};
 use std::hash::{BuildHasherDefault, Hasher};
 
 pub use register::{Correction, NotRegistered};
+use surface::Columns;
+pub use surface::MeshedSurface;
 
 /// Number of class ids a cell counts votes for (`landing.v1.SemanticClass` 0..=15).
 pub const CLASSES: usize = 16;
@@ -376,6 +382,8 @@ pub struct FusionMap<K> {
     frames: u32,
     /// Whether any scan came with classes.
     classified: bool,
+    /// The top surface kept between scans, with its triangulation.
+    columns: Columns,
 }
 
 /// The hash of a cell key: its three coordinates mixed by multiplication (deterministic, so a
@@ -475,6 +483,7 @@ impl<K> FusionMap<K> {
             start_s: 0.0,
             frames: 0,
             classified: false,
+            columns: Columns::new(),
         })
     }
 
@@ -491,6 +500,7 @@ impl<K> FusionMap<K> {
         self.last = None;
         self.frames = 0;
         self.classified = false;
+        self.columns.forget();
     }
 
     /// Adds a scan; returns why the map started over first, if it did. The same as
@@ -566,38 +576,45 @@ impl<K> FusionMap<K> {
 
     /// The points of [`FusionMap::fused`] alone: its votes and views do not move them.
     pub fn surface(&self, bounds: [[f64; 2]; 2]) -> Surface {
+        match self.origin {
+            Some(origin) => top_surface(&self.cells, origin, self.params.cell_size_m, bounds),
+            None => Surface::default(),
+        }
+    }
+
+    /// The whole top surface ([`FusionMap::surface`] without bounds) with its Delaunay
+    /// triangulation, in the map's own coordinates (relative to the origin
+    /// [`FusionMap::origin_for`] gives), for the geometry. Both are kept between scans and
+    /// changed only where the scans since the last call changed the surface (see
+    /// [`MeshedSurface`] for the order of its points): most of a map stays as it was from one
+    /// scan to the next. The triangulation is the one `landing_geometry::triangulate_points`
+    /// makes of the points, but for the order of its triangles.
+    pub fn meshed_surface(&mut self) -> MeshedSurface {
         let Some(origin) = self.origin else {
-            return Surface::default();
+            return MeshedSurface {
+                surface: Surface::default(),
+                points: Vec::new(),
+                triangulation: Ok(landing_geometry::Triangulation::default()),
+            };
         };
         let c = self.params.cell_size_m;
-        let inside = |p: &[f64; 3]| {
-            p[0] >= bounds[0][0]
-                && p[0] <= bounds[1][0]
-                && p[1] >= bounds[0][1]
-                && p[1] <= bounds[1][1]
-        };
-        // Read in the table's own (memory) order: sorting references instead would chase each
-        // one afterwards. Keys are packed into one integer in (x, y, z) order, one comparison
-        // per step of the sort.
-        let mut columns: Vec<(u128, [f64; 3])> = self
-            .cells
-            .iter()
-            .map(|(key, cell)| (sort_key(key), cell.position(key, origin, c)))
-            .collect();
-        columns.sort_unstable_by_key(|column| column.0);
-        // Sorted by (x, y, z): the last cell of each column is its top.
-        columns.dedup_by(|upper, lower| {
-            let same_column = upper.0 >> 32 == lower.0 >> 32;
-            if same_column {
-                *lower = *upper;
-            }
-            same_column
-        });
-        columns.retain(|column| inside(&column.1));
-        Surface {
-            keys: columns.iter().map(|column| unsort_key(column.0)).collect(),
-            points: columns.into_iter().map(|column| column.1).collect(),
-        }
+        let cells = &self.cells;
+        let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+        self.columns.meshed(
+            || top_surface(cells, origin, c, everything),
+            |key| {
+                cells
+                    .get(key)
+                    .map_or([f64::NAN; 3], |cell| cell.position(key, origin, c))
+            },
+            origin,
+        )
+    }
+
+    /// What the kept triangulation of [`FusionMap::meshed_surface`] has done since the map was
+    /// made: updates repaired in place and made from scratch, points moved and inserted.
+    pub fn mesh_stats(&self) -> landing_geometry::delaunay::KeptStats {
+        self.columns.mesh_stats()
     }
 
     /// The classes and [`Fused::unresolved`] flags of a `surface` of this map, as
@@ -647,10 +664,11 @@ impl<K> FusionMap<K> {
         self.cells.len()
     }
 
-    /// Bytes the cells take (table slots included), not counting the keep-out footprints, whose
-    /// size only their owner knows.
+    /// Bytes the cells take (table slots included) with the kept surface and its triangulation
+    /// ([`FusionMap::meshed_surface`]), not counting the keep-out footprints, whose size only
+    /// their owner knows.
     pub fn cell_bytes(&self) -> usize {
-        self.cells.capacity() * (std::mem::size_of::<([i32; 3], Cell)>() + 1)
+        self.cells.capacity() * (std::mem::size_of::<([i32; 3], Cell)>() + 1) + self.columns.bytes()
     }
 
     /// The world position the map's coordinates are relative to once `scan` is inserted: its
@@ -729,6 +747,7 @@ impl<K> FusionMap<K> {
                 finest: f32::INFINITY,
             });
             cell.seen_s = seen_s;
+            self.columns.touch(group[0].0);
             for &(_, offset, _) in group {
                 let n = f32::from(cell.points.min(MAX_MEAN_WEIGHT - 1));
                 for (mean, o) in cell.mean.iter_mut().zip(offset) {
@@ -826,6 +845,15 @@ impl<K> FusionMap<K> {
 
     /// Forgets cells past the horizon, then the oldest cells past the bound.
     fn forget_cells(&mut self, now_s: f32) {
+        let held = self.cells.len();
+        self.forget_old_cells(now_s);
+        if self.cells.len() < held {
+            self.columns.forget();
+        }
+    }
+
+    /// [`FusionMap::forget_cells`] on the cells alone.
+    fn forget_old_cells(&mut self, now_s: f32) {
         let horizon = self.params.horizon_s as f32;
         let full = self.cells.len() > self.params.max_cells;
         if full || self.frames.is_multiple_of(EXPIRY_EVERY_FRAMES) {
@@ -841,6 +869,40 @@ impl<K> FusionMap<K> {
                 self.cells.remove(key);
             }
         }
+    }
+}
+
+/// The top surface of `cells` (of a map with `origin` and cells of side `c`) inside `bounds`
+/// ([`FusionMap::surface`]).
+fn top_surface(
+    cells: &HashMap<[i32; 3], Cell, BuildHasherDefault<CellHasher>>,
+    origin: [f64; 3],
+    c: f64,
+    bounds: [[f64; 2]; 2],
+) -> Surface {
+    let inside = |p: &[f64; 3]| {
+        p[0] >= bounds[0][0] && p[0] <= bounds[1][0] && p[1] >= bounds[0][1] && p[1] <= bounds[1][1]
+    };
+    // Read in the table's own (memory) order: sorting references instead would chase each one
+    // afterwards. Keys are packed into one integer in (x, y, z) order, one comparison per step
+    // of the sort.
+    let mut columns: Vec<(u128, [f64; 3])> = cells
+        .iter()
+        .map(|(key, cell)| (sort_key(key), cell.position(key, origin, c)))
+        .collect();
+    columns.sort_unstable_by_key(|column| column.0);
+    // Sorted by (x, y, z): the last cell of each column is its top.
+    columns.dedup_by(|upper, lower| {
+        let same_column = upper.0 >> 32 == lower.0 >> 32;
+        if same_column {
+            *lower = *upper;
+        }
+        same_column
+    });
+    columns.retain(|column| inside(&column.1));
+    Surface {
+        keys: columns.iter().map(|column| unsort_key(column.0)).collect(),
+        points: columns.into_iter().map(|column| column.1).collect(),
     }
 }
 

@@ -12,10 +12,11 @@
 //! them.
 
 use std::collections::HashMap;
+use std::hash::BuildHasherDefault;
 
 use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, UnitQuaternion, Vector3, Vector6};
 
-use crate::FusionMap;
+use crate::{CellHasher, FusionMap};
 
 /// At most this many of a scan's points are matched (every n-th, in scan order).
 const MAX_POINTS: usize = 1024;
@@ -121,8 +122,10 @@ impl std::fmt::Display for NotRegistered {
 }
 
 /// Each cell's neighbourhood plane (centroid, unit normal) when it forms one, as far as one
-/// [`FusionMap::register`] call has looked.
-type Planes = HashMap<[i32; 3], Option<(Vector3<f64>, Vector3<f64>)>>;
+/// [`FusionMap::register`] call has looked, keyed with the map's own cell hash (several times
+/// cheaper than SipHash).
+type Planes =
+    HashMap<[i32; 3], Option<(Vector3<f64>, Vector3<f64>)>, BuildHasherDefault<CellHasher>>;
 
 /// One scan point matched to a local plane of the map (map-origin coordinates, metres).
 struct Match {
@@ -167,7 +170,7 @@ impl<K> FusionMap<K> {
         let mut rms_after = 0.0;
         // The plane of each cell's neighbourhood, once per call: a later round's point mostly
         // falls in the cell it fell in before (the correction is centimetres).
-        let mut planes = HashMap::new();
+        let mut planes = Planes::default();
         for _ in 0..ROUNDS {
             let moved: Vec<Vector3<f64>> = sample.iter().map(|p| apply(&x, p, &pivot)).collect();
             let matches: Vec<Match> = moved

@@ -306,8 +306,13 @@ fn cells_are_bounded_in_number_and_time() {
         };
         m.insert(s);
         assert!(m.cells() <= 1_000, "frame {k}: {} cells", m.cells());
+        // The kept surface and its triangulation count too: at most one point per cell.
+        let meshed = m.meshed_surface();
+        assert!(meshed.points.len() <= m.cells());
     }
-    assert!(m.cell_bytes() < 1_000 * 200, "{} bytes", m.cell_bytes());
+    // About 100 bytes a cell, and 150 more a column for the kept surface (table slots and
+    // spare capacity included).
+    assert!(m.cell_bytes() < 1_000 * 350, "{} bytes", m.cell_bytes());
     // The newest scan's cells are the ones kept.
     let newest = roof([39.0 * 0.5, 0.0, 0.0]);
     let f = m.fused([[19.5, 0.0], [29.5, 10.0]], landable);
@@ -510,4 +515,124 @@ fn the_origin_lies_among_the_first_scans_points_and_holds_until_a_reset() {
     let moved = m.origin_for(&restart);
     assert!(moved[0].abs() < 20.0 && moved[1].abs() < 20.0, "{moved:?}");
     assert!(landing_fusion::centre(&[], [1.0, 2.0, 3.0]) == [1.0, 2.0, 3.0]);
+}
+
+/// The meshed surface's points, sorted by position, against the surface's: the same columns.
+fn sorted(points: &[[f64; 3]]) -> Vec<[u64; 3]> {
+    let mut v: Vec<[u64; 3]> = points.iter().map(|p| p.map(f64::to_bits)).collect();
+    v.sort_unstable();
+    v
+}
+
+/// Checks a map's meshed surface against its surface and a fresh triangulation of its points.
+fn check_meshed(m: &mut FusionMap<u32>, what: &str) -> Result<(), TestCaseError> {
+    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+    let meshed = m.meshed_surface();
+    let surface = m.surface(everything);
+    prop_assert_eq!(
+        sorted(&meshed.surface.points),
+        sorted(&surface.points),
+        "{}",
+        what
+    );
+    prop_assert_eq!(meshed.points.len(), meshed.surface.points.len());
+    let tri = meshed.triangulation.clone().unwrap();
+    let xy: Vec<[f64; 2]> = meshed
+        .points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1])])
+        .collect();
+    if let Err(e) = tri.check_invariants(&xy, true) {
+        return Err(TestCaseError::fail(format!("{what}: {e}")));
+    }
+    let fresh = landing_geometry::triangulate_points(&meshed.points).unwrap();
+    prop_assert_eq!(tri.len(), fresh.len(), "{}: triangles", what);
+    // The same classes as the surface's, point for point.
+    let (classes, unresolved) = m.classes_of(&meshed.surface, landable);
+    let want = m.fused(everything, landable);
+    let by_point = |pts: &[[f64; 3]], c: &Option<Vec<u8>>, u: &[bool]| {
+        let mut v: Vec<([u64; 3], u8, bool)> = pts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (p.map(f64::to_bits), c.as_ref().map_or(0, |c| c[i]), u[i]))
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    prop_assert_eq!(
+        by_point(&meshed.surface.points, &classes, &unresolved),
+        by_point(&want.points, &want.classes, &want.unresolved)
+    );
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(48))]
+
+    /// The surface kept between scans is the surface read afresh, and its kept triangulation a
+    /// Delaunay triangulation of its points with the fresh one's triangle count, after every
+    /// scan of random approaches: the same roof scanned again and again (means moving, new
+    /// columns at its edges, new tops on it), resets, time gaps past the horizon and a small
+    /// cell bound that forgets cells.
+    #[test]
+    fn the_kept_surface_and_mesh_are_the_fresh_ones(
+        seed in any::<u64>(),
+        scans in prop::collection::vec((0.0..0.6f64, 0u8..20, 0.0..1.0f64), 1..25),
+        max_cells in prop::sample::select(vec![1_000usize, 250_000]),
+    ) {
+        let params = FusionParams { max_cells, horizon_s: 2.0, ..FusionParams::default() };
+        let mut m: FusionMap<u32> = FusionMap::new(params).unwrap();
+        let mut g = landing_geometry::synthetic::Pcg32::new(seed);
+        let mut t = 0.0;
+        for (k, (dt, event, reach)) in scans.iter().enumerate() {
+            t += dt;
+            // A 12 m roof at 30 m with an AC unit, sampled anew each scan, reaching a little
+            // farther or less far; sometimes a box on it (new tops) or ground around it.
+            let n = 300 + (g.next_u32() % 700) as usize;
+            let half = 3.0 + 3.0 * reach;
+            let pts: Vec<[f64; 3]> = (0..n)
+                .map(|_| {
+                    let (x, y) = (g.range(-half, half), g.range(-half, half));
+                    let z = if x.abs() < 1.0 && y.abs() < 1.0 && *event % 3 == 0 {
+                        31.2
+                    } else if x.abs() > 5.0 {
+                        0.02 * g.normal()
+                    } else {
+                        30.0 + 0.01 * g.normal()
+                    };
+                    [x, y, z]
+                })
+                .collect();
+            let classes = vec![ROOFTOP; pts.len()];
+            m.insert(Scan { reset: *event == 19, ..scan(t, &pts, &classes) });
+            check_meshed(&mut m, &format!("scan {k}"))?;
+        }
+    }
+}
+
+#[test]
+fn the_kept_mesh_is_repaired_in_place_on_an_approach() {
+    // A roof scanned at 10 Hz: after the first scan, updates are repaired in place, not
+    // triangulated again (the speed of a fused frame rests on it).
+    let mut m = map();
+    let mut g = landing_geometry::synthetic::Pcg32::new(3);
+    for k in 0..20 {
+        let pts: Vec<[f64; 3]> = (0..1500)
+            .map(|_| {
+                [
+                    g.range(-6.0, 6.0),
+                    g.range(-6.0, 6.0),
+                    30.0 + 0.01 * g.normal(),
+                ]
+            })
+            .collect();
+        let classes = vec![ROOFTOP; pts.len()];
+        m.insert(scan(f64::from(k) * 0.1, &pts, &classes));
+        let meshed = m.meshed_surface();
+        assert!(meshed.triangulation.is_ok());
+    }
+    let stats = m.mesh_stats();
+    assert_eq!(stats.rebuilt, 1, "{stats:?}");
+    assert_eq!(stats.repaired, 19, "{stats:?}");
+    assert!(stats.moved > 10_000, "{stats:?}");
 }

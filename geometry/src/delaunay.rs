@@ -15,6 +15,12 @@
 //! - every loop is bounded and reports [`GeometryError::IterationLimit`] instead of spinning.
 //!
 //! The output layout is [`Triangulation`]'s: counter-clockwise triangles, half-edge twins.
+//!
+//! [`KeptTriangulation`] keeps such a triangulation while its points change a few at a time (a
+//! fusion map's surface from one scan to the next): new points are inserted as the sweep inserts
+//! a late one, moved points moved in place or taken out and inserted again, each followed by
+//! flips, with the same exact predicates; the result is a Delaunay triangulation of the points
+//! after every update (tested against [`triangulate`] on random edit sequences).
 
 use crate::GeometryError;
 use crate::mesh::{EMPTY, Triangulation, next_halfedge, prev_halfedge};
@@ -31,9 +37,25 @@ fn triangulate_deferring(
     points: &[[f64; 3]],
     defer: impl Fn(usize) -> bool,
 ) -> Result<Triangulation, GeometryError> {
+    Ok(match sweep(points, defer)? {
+        Some((b, order)) => b.finish(&order),
+        None => Triangulation::default(),
+    })
+}
+
+/// A finished sweep: the builder, whose point numbers are ranks in the sweep order, and that
+/// order ((squared distance's bits, input index), sorted).
+type Swept = (Builder, Vec<(u64, u32)>);
+
+/// The sweep itself: the finished builder, whose point numbers are ranks in the returned sweep
+/// order, or `None` when there is no triangle (fewer than three distinct points, or collinear).
+fn sweep(
+    points: &[[f64; 3]],
+    defer: impl Fn(usize) -> bool,
+) -> Result<Option<Swept>, GeometryError> {
     let n = points.len();
     if n < 3 {
-        return Ok(Triangulation::default());
+        return Ok(None);
     }
     if n >= EMPTY as usize {
         return Err(GeometryError::InvalidParameter {
@@ -43,19 +65,20 @@ fn triangulate_deferring(
         });
     }
     let Some((seed, center)) = seed_triangle(points) else {
-        return Ok(Triangulation::default()); // all points coincide or lie on one line
+        return Ok(None); // all points coincide or lie on one line
     };
-    let sweep = Sweep::new(points, center, seed);
-    let [r0, r1, r2] = sweep.seed_ranks;
-    let coords = &sweep.coords;
-    let mut b = Builder::new(coords, center);
-    b.seed(r0, r1, r2);
+    let Sweep {
+        order,
+        coords,
+        seed_ranks: [r0, r1, r2],
+    } = Sweep::new(points, center, seed);
     let seeds = [
         coords[r0 as usize],
         coords[r1 as usize],
         coords[r2 as usize],
     ];
-    let order = &sweep.order;
+    let mut b = Builder::new(coords, center);
+    b.seed(r0, r1, r2);
     let mut deferred = Vec::new();
     let mut k = 0;
     while k < n {
@@ -70,10 +93,10 @@ fn triangulate_deferring(
             if r32 == r0 || r32 == r1 || r32 == r2 {
                 continue;
             }
-            let p = coords[r];
+            let p = b.points[r];
             let i = order[r].1;
             let dup = seeds.contains(&p)
-                || (end - k > 1 && (k..end).any(|m| order[m].1 < i && coords[m] == p));
+                || (end - k > 1 && (k..end).any(|m| order[m].1 < i && b.points[m] == p));
             if dup {
                 continue;
             }
@@ -86,7 +109,7 @@ fn triangulate_deferring(
     for r in deferred {
         b.add_inside(r)?;
     }
-    Ok(b.finish(&sweep.order))
+    Ok(Some((b, order)))
 }
 
 /// The seed triangle, counter-clockwise, and its circumcentre: the point nearest the
@@ -265,9 +288,9 @@ fn circumcenter(a: [f64; 2], b: [f64; 2], c: [f64; 2]) -> [f64; 2] {
 }
 
 /// The growing triangulation and its convex hull.
-struct Builder<'a> {
+struct Builder {
     /// Coordinates in sweep order; the builder's point numbers are ranks in this order.
-    points: &'a [[f64; 2]],
+    points: Vec<[f64; 2]>,
     triangles: Vec<u32>,
     halfedges: Vec<u32>,
     /// Counter-clockwise hull as a linked list over point indices; `next[v] == v` marks a point
@@ -288,8 +311,8 @@ struct Builder<'a> {
     flip_budget: usize,
 }
 
-impl<'a> Builder<'a> {
-    fn new(points: &'a [[f64; 2]], center: [f64; 2]) -> Self {
+impl Builder {
+    fn new(points: Vec<[f64; 2]>, center: [f64; 2]) -> Self {
         let n = points.len();
         let hash_size = ((n as f64).sqrt().ceil() as usize).max(1);
         let flip_budget = 64 * n + 1024;
@@ -322,6 +345,79 @@ impl<'a> Builder<'a> {
             triangles,
             halfedges,
         }
+    }
+
+    /// The same triangulation with the points numbered by their input indices (`order` maps
+    /// ranks to them), to be kept and changed ([`KeptTriangulation`]).
+    fn into_input_indices(mut self, order: &[(u64, u32)]) -> Self {
+        let n = order.len();
+        let index = |r: u32| {
+            if r == EMPTY {
+                EMPTY
+            } else {
+                order[r as usize].1
+            }
+        };
+        for v in &mut self.triangles {
+            *v = order[*v as usize].1;
+        }
+        for h in &mut self.hash {
+            *h = index(*h);
+        }
+        let mut points = vec![[0.0; 2]; n];
+        let (mut next, mut prev) = (vec![EMPTY; n], vec![EMPTY; n]);
+        let (mut tri, mut key) = (vec![EMPTY; n], vec![0; n]);
+        for (r, &(_, i)) in order.iter().enumerate() {
+            let i = i as usize;
+            points[i] = self.points[r];
+            next[i] = index(self.hull_next[r]);
+            prev[i] = index(self.hull_prev[r]);
+            tri[i] = self.hull_tri[r];
+            key[i] = self.hull_key[r];
+        }
+        self.points = points;
+        self.hull_next = next;
+        self.hull_prev = prev;
+        self.hull_tri = tri;
+        self.hull_key = key;
+        self
+    }
+
+    /// Where a hull point of `dents` turns the wrong way (a point left inside when a hull point
+    /// was taken out: only where the points around it were collinear with it), joins its hull
+    /// neighbours with a triangle over it, and so on around; the new triangles' inner edges go
+    /// to `touched`.
+    fn fill_dents(&mut self, mut dents: Vec<u32>, touched: &mut Vec<u32>) {
+        // Each triangle takes one point off the hull: at most as many as points.
+        let mut budget = self.points.len();
+        while let Some(h) = dents.pop() {
+            let (p, n) = (self.hull_prev[h as usize], self.hull_next[h as usize]);
+            if n == h
+                || n == EMPTY
+                || budget == 0
+                || orient(self.xy(p), self.xy(h), self.xy(n)) >= 0.0
+            {
+                continue;
+            }
+            budget -= 1;
+            let (hn, ph) = (self.hull_tri[h as usize], self.hull_tri[p as usize]);
+            let t = self.add_triangle(p, n, h, EMPTY, hn, ph);
+            self.hull_tri[p as usize] = t;
+            self.hull_next[p as usize] = n;
+            self.hull_prev[n as usize] = p;
+            self.hull_next[h as usize] = h;
+            touched.extend([t + 1, t + 2]);
+            dents.extend([p, n]);
+        }
+    }
+
+    /// Makes room for one more point, at `p`, not yet in the triangulation.
+    fn grow(&mut self, p: [f64; 2]) {
+        self.points.push(p);
+        self.hull_next.push(EMPTY);
+        self.hull_prev.push(EMPTY);
+        self.hull_tri.push(EMPTY);
+        self.hull_key.push(0);
     }
 
     #[inline]
@@ -508,8 +604,9 @@ impl<'a> Builder<'a> {
     }
 
     /// Adds point `i`, which lies inside or on the hull: walk to its triangle, split it (or the edge
-    /// the point is on), flip. A point equal to an existing vertex is skipped.
-    fn add_inside(&mut self, i: u32) -> Result<(), GeometryError> {
+    /// the point is on), flip. A point equal to an existing vertex is skipped: returns whether
+    /// the point was added.
+    fn add_inside(&mut self, i: u32) -> Result<bool, GeometryError> {
         let p = self.xy(i);
         // Start from the hull edge nearest in angle: late points lie near the hull.
         let s = self.hull_point_near(self.hash_key(p));
@@ -518,7 +615,42 @@ impl<'a> Builder<'a> {
         } else {
             self.hull_tri[s as usize]
         };
-        let mut t = start as usize / 3;
+        self.add_inside_from(i, start as usize / 3)
+    }
+
+    /// [`Builder::add_inside`], with the walk to the point's triangle starting at triangle `t`.
+    fn add_inside_from(&mut self, i: u32, t: usize) -> Result<bool, GeometryError> {
+        let p = self.xy(i);
+        let Some(t) = self.locate(t, p)? else {
+            // Outside the hull after all (only for points deferred or moved on purpose).
+            return if self.add_outside(i)? {
+                Ok(true)
+            } else {
+                Err(GeometryError::InvalidMesh {
+                    reason: format!("point {i} is neither inside nor outside the hull"),
+                })
+            };
+        };
+        let v = [
+            self.triangles[3 * t],
+            self.triangles[3 * t + 1],
+            self.triangles[3 * t + 2],
+        ];
+        if v.iter().any(|&v| self.xy(v) == p) {
+            return Ok(false); // duplicate
+        }
+        let on_edge = (0..3).find(|&k| orient(self.xy(v[k]), self.xy(v[(k + 1) % 3]), p) == 0.0);
+        match on_edge {
+            None => self.split_triangle(t, i)?,
+            Some(k) => self.split_edge(3 * t + k, i)?,
+        }
+        Ok(true)
+    }
+
+    /// The triangle whose closure holds `p`, walking from triangle `t` across the edges `p` lies
+    /// beyond; `None` when the walk leaves the hull (`p` is outside it). The straight walk ends
+    /// in a Delaunay triangulation; it is bounded all the same.
+    fn locate(&self, mut t: usize, p: [f64; 2]) -> Result<Option<usize>, GeometryError> {
         let limit = self.triangles.len() + 16;
         let mut steps = 0usize;
         'walk: loop {
@@ -534,33 +666,13 @@ impl<'a> Builder<'a> {
                 if orient(self.xy(a), self.xy(b), p) < 0.0 {
                     let o = self.halfedges[e];
                     if o == EMPTY {
-                        // Outside the hull after all (only for points deferred on purpose).
-                        return if self.add_outside(i)? {
-                            Ok(())
-                        } else {
-                            Err(GeometryError::InvalidMesh {
-                                reason: format!("point {i} is neither inside nor outside the hull"),
-                            })
-                        };
+                        return Ok(None);
                     }
                     t = o as usize / 3;
                     continue 'walk;
                 }
             }
-            break;
-        }
-        let v = [
-            self.triangles[3 * t],
-            self.triangles[3 * t + 1],
-            self.triangles[3 * t + 2],
-        ];
-        if v.iter().any(|&v| self.xy(v) == p) {
-            return Ok(()); // duplicate
-        }
-        let on_edge = (0..3).find(|&k| orient(self.xy(v[k]), self.xy(v[(k + 1) % 3]), p) == 0.0);
-        match on_edge {
-            None => self.split_triangle(t, i),
-            Some(k) => self.split_edge(3 * t + k, i),
+            return Ok(Some(t));
         }
     }
 
@@ -643,7 +755,7 @@ impl<'a> Builder<'a> {
     fn legalize(&mut self, a: u32) -> Result<(), GeometryError> {
         let flipped = legalize(
             Mesh {
-                points: self.points,
+                points: &self.points,
                 triangles: &mut self.triangles,
                 halfedges: &mut self.halfedges,
                 hull_tri: &mut self.hull_tri,
@@ -714,28 +826,570 @@ fn legalize(m: Mesh<'_>, stack: &mut Vec<u32>, a: u32, budget: usize) -> Option<
         }
         flips += 1;
         let b = b as usize;
-        let (bl, br) = (prev_halfedge(b), next_halfedge(b));
-        let (p0, p1) = (triangles[ar], triangles[bl]);
-        triangles[a] = p1;
-        triangles[b] = p0;
-        let hbl = halfedges[bl];
-        let har = halfedges[ar];
-        halfedges[a] = hbl;
-        if hbl == EMPTY {
-            hull_tri[p1 as usize] = a as u32;
-        } else {
-            halfedges[hbl as usize] = a as u32;
-        }
-        halfedges[b] = har;
-        if har == EMPTY {
-            hull_tri[p0 as usize] = b as u32;
-        } else {
-            halfedges[har as usize] = b as u32;
-        }
-        halfedges[ar] = bl as u32;
-        halfedges[bl] = ar as u32;
-        stack.push(br as u32);
+        flip(triangles, halfedges, hull_tri, a, b);
+        stack.push(next_halfedge(b) as u32);
     }
+}
+
+/// Flips the edge of half-edges `a` and its opposite `b`, which must be the diagonal of a convex
+/// quadrilateral: afterwards `a` and `b` are the outer edges that were `prev(b)` and `prev(a)`,
+/// and `prev(a)`, `prev(b)` the new diagonal (delaunator's flip).
+#[inline(always)]
+fn flip(triangles: &mut [u32], halfedges: &mut [u32], hull_tri: &mut [u32], a: usize, b: usize) {
+    let (ar, bl) = (prev_halfedge(a), prev_halfedge(b));
+    let (p0, p1) = (triangles[ar], triangles[bl]);
+    triangles[a] = p1;
+    triangles[b] = p0;
+    let hbl = halfedges[bl];
+    let har = halfedges[ar];
+    halfedges[a] = hbl;
+    if hbl == EMPTY {
+        hull_tri[p1 as usize] = a as u32;
+    } else {
+        halfedges[hbl as usize] = a as u32;
+    }
+    halfedges[b] = har;
+    if har == EMPTY {
+        hull_tri[p0 as usize] = b as u32;
+    } else {
+        halfedges[har as usize] = b as u32;
+    }
+    halfedges[ar] = bl as u32;
+    halfedges[bl] = ar as u32;
+}
+
+/// A Delaunay triangulation kept while its points change: a caller whose points mostly stay
+/// where they were (a fusion map's surface between two scans) says at each
+/// [`KeptTriangulation::update`] which of them moved or are new, and the triangulation is
+/// repaired there instead of made again from all the points.
+///
+/// What it keeps, checked after every update by the tests against a fresh [`triangulate`] on
+/// seeded random edit sequences: a Delaunay triangulation of exactly the points given (every edge
+/// locally Delaunay by the exact in-circle test, every point a vertex), with [`triangulate`]'s
+/// triangle count. Where no four points lie on one circle the Delaunay triangulation is unique,
+/// so the triangles are [`triangulate`]'s; where some do, either way of splitting them may be
+/// kept. The triangles' order in the arrays is its own.
+///
+/// How: a new point is inserted as the sweep inserts a late one (its triangle split, or, outside
+/// the hull, joined to the hull edges it sees), then flipped. A moved point whose triangles all
+/// stay counter-clockwise at its new place is moved in place, then the edges of its triangles
+/// are flipped until each is locally Delaunay: only these edges can have stopped being so, and
+/// Lawson's flips make any triangulation Delaunay. Anything else (a hull point moved, a point
+/// whose triangles would fold over, a duplicate position, fewer points than before, a bound
+/// reached) triangulates the points again from scratch.
+#[derive(Default)]
+pub struct KeptTriangulation {
+    /// The triangulation in the points' own indices; `None` where there is no triangle yet.
+    mesh: Option<Builder>,
+    /// Per point, a half-edge out of it: a hint, which flips can make stale (see
+    /// [`KeptTriangulation::star_of`]).
+    from: Vec<u32>,
+    /// Every point is a vertex (no two share a position).
+    complete: bool,
+    /// The half-edges of a moved point's triangles, reused.
+    scratch: Vec<u32>,
+    stats: KeptStats,
+}
+
+/// What a [`KeptTriangulation`] has done so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct KeptStats {
+    /// Updates repaired in place.
+    pub repaired: u64,
+    /// Updates that triangulated from scratch (the first included).
+    pub rebuilt: u64,
+    /// Points moved in place.
+    pub moved: u64,
+    /// Points inserted.
+    pub inserted: u64,
+    /// Points moved by taking them out and inserting them again (on the hull, or where their
+    /// triangles would fold over).
+    pub reinserted: u64,
+}
+
+impl std::fmt::Debug for KeptTriangulation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("KeptTriangulation")
+            .field("points", &self.from.len())
+            .field(
+                "triangles",
+                &self.mesh.as_ref().map_or(0, |b| b.triangles.len() / 3),
+            )
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl KeptTriangulation {
+    /// An empty triangulation; the first update makes it.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Brings the triangulation to `points` (x/y; z is ignored), the same points as at the last
+    /// update but for those listed in `changed` (moved, in any order, repeats allowed) and those
+    /// past the previous length (new; listing them is allowed). Points removed or renumbered:
+    /// call [`KeptTriangulation::rebuild`]. A point moved and not listed leaves the
+    /// triangulation wrong. Coordinates must be finite and within
+    /// [`crate::MAX_ABS_COORDINATE_M`], as [`crate::detect`] requires.
+    pub fn update(&mut self, points: &[[f32; 3]], changed: &[u32]) -> Result<(), GeometryError> {
+        if let Some(&i) = changed.iter().find(|&&i| i as usize >= points.len()) {
+            return Err(GeometryError::InvalidParameter {
+                field: "changed",
+                value: i.to_string(),
+                reason: "names no point",
+            });
+        }
+        let old = self.from.len().min(points.len());
+        let news = old as u32..points.len() as u32;
+        check_coordinates(points, changed.iter().copied().chain(news))?;
+        // A failed repair leaves the mesh half-changed: the rebuild replaces it whole.
+        match self.repair(points, changed) {
+            Ok(true) => {
+                self.stats.repaired += 1;
+                Ok(())
+            }
+            Ok(false) | Err(_) => self.rebuild(points),
+        }
+    }
+
+    /// Triangulates `points` from scratch (as [`triangulate`] does) and keeps the result.
+    pub fn rebuild(&mut self, points: &[[f32; 3]]) -> Result<(), GeometryError> {
+        check_coordinates(points, 0..points.len() as u32)?;
+        self.stats.rebuilt += 1;
+        let wide: Vec<[f64; 3]> = points.iter().map(|p| p.map(f64::from)).collect();
+        self.mesh = None;
+        self.from = vec![EMPTY; points.len()];
+        self.complete = false;
+        let Some((b, order)) = sweep(&wide, |_| false)? else {
+            return Ok(());
+        };
+        let b = b.into_input_indices(&order);
+        for (e, &v) in b.triangles.iter().enumerate() {
+            self.from[v as usize] = e as u32;
+        }
+        self.complete = !self.from.contains(&EMPTY);
+        self.mesh = Some(b);
+        Ok(())
+    }
+
+    /// The triangulation now, in the points' indices, for [`crate::Cloud::with_triangulation`].
+    pub fn triangulation(&self) -> Triangulation {
+        self.mesh
+            .as_ref()
+            .map(|b| Triangulation {
+                triangles: b.triangles.clone(),
+                halfedges: b.halfedges.clone(),
+            })
+            .unwrap_or_default()
+    }
+
+    /// What the updates have done so far.
+    pub fn stats(&self) -> KeptStats {
+        self.stats
+    }
+
+    /// Bytes the triangulation and its bookkeeping take.
+    pub fn bytes(&self) -> usize {
+        let words = self.mesh.as_ref().map_or(0, |b| {
+            b.triangles.capacity()
+                + b.halfedges.capacity()
+                + 2 * b.points.capacity()
+                + b.hull_next.capacity()
+                + b.hull_prev.capacity()
+                + b.hull_tri.capacity()
+                + b.hull_key.capacity()
+                + b.hash.capacity()
+        });
+        4 * (words + self.from.capacity() + self.scratch.capacity())
+    }
+
+    /// Moves and inserts in place; false where that cannot be done (the caller rebuilds).
+    fn repair(&mut self, points: &[[f32; 3]], changed: &[u32]) -> Result<bool, GeometryError> {
+        let Some(b) = self.mesh.as_mut() else {
+            return Ok(false);
+        };
+        let old = b.points.len();
+        if !self.complete || points.len() < old {
+            return Ok(false);
+        }
+        b.flip_budget = 64 * points.len() + 1024;
+        b.flips_left = b.flip_budget;
+        let xy = |i: usize| [f64::from(points[i][0]), f64::from(points[i][1])];
+        for &i in changed.iter().filter(|&&i| (i as usize) < old) {
+            if !self.move_point(i, xy(i as usize))? {
+                return Ok(false);
+            }
+        }
+        let Some(b) = self.mesh.as_mut() else {
+            return Ok(false);
+        };
+        let mut hint = 0;
+        for i in old..points.len() {
+            b.grow(xy(i));
+            self.from.push(EMPTY);
+            // The newest triangle lies at the previous insertion: new points come in runs.
+            if !b.add_inside_from(i as u32, hint)? {
+                return Ok(false); // a duplicate position
+            }
+            hint = b.triangles.len() / 3 - 1;
+            self.from[i] = 3 * hint as u32;
+            self.stats.inserted += 1;
+        }
+        Ok(true)
+    }
+
+    /// Moves point `i` to `q`: in place where its triangles all stay counter-clockwise there,
+    /// else taken out and inserted again; false where neither can be done.
+    fn move_point(&mut self, i: u32, q: [f64; 2]) -> Result<bool, GeometryError> {
+        let Some(b) = self.mesh.as_ref() else {
+            return Ok(false);
+        };
+        if b.xy(i) == q {
+            return Ok(true);
+        }
+        let mut star = std::mem::take(&mut self.scratch);
+        let moved = match self.move_in_place(i, q, &mut star) {
+            Ok(false) => self.remove_and_insert(i, q, &mut star),
+            other => other,
+        };
+        self.scratch = star;
+        moved
+    }
+
+    /// Moves interior point `i` to `q` where its triangles all stay counter-clockwise there, then
+    /// flips their edges until each is locally Delaunay; false where it cannot.
+    fn move_in_place(
+        &mut self,
+        i: u32,
+        q: [f64; 2],
+        star: &mut Vec<u32>,
+    ) -> Result<bool, GeometryError> {
+        if self.on_hull(i) || !self.star_of(i, star)? {
+            return Ok(false);
+        }
+        let b = self.mesh.as_mut().expect("called with a mesh");
+        let unfolded = star.iter().all(|&e| {
+            let e = e as usize;
+            let (a, c) = (b.triangles[next_halfedge(e)], b.triangles[prev_halfedge(e)]);
+            orient(q, b.xy(a), b.xy(c)) > 0.0
+        });
+        if !unfolded {
+            return Ok(false);
+        }
+        b.points[i as usize] = q;
+        let edges: Vec<u32> = star
+            .iter()
+            .flat_map(|&e| triangle_edges(e as usize))
+            .collect();
+        star.clear();
+        star.extend(edges);
+        self.lawson(star)?;
+        self.stats.moved += 1;
+        Ok(true)
+    }
+
+    /// Takes point `i` out of the triangulation and inserts it again at `q`; false where it
+    /// cannot.
+    fn remove_and_insert(
+        &mut self,
+        i: u32,
+        q: [f64; 2],
+        star: &mut Vec<u32>,
+    ) -> Result<bool, GeometryError> {
+        let Some(near) = self.remove_vertex(i, star)? else {
+            return Ok(false);
+        };
+        let b = self.mesh.as_mut().expect("called with a mesh");
+        b.points[i as usize] = q;
+        if !b.add_inside_from(i, near)? {
+            return Ok(false); // onto another point
+        }
+        self.from[i as usize] = (b.triangles.len() - 3) as u32;
+        self.stats.reinserted += 1;
+        Ok(true)
+    }
+
+    /// Whether point `i` is on the hull.
+    fn on_hull(&self, i: u32) -> bool {
+        self.mesh.as_ref().is_some_and(|b| {
+            let next = b.hull_next[i as usize];
+            next != EMPTY && next != i
+        })
+    }
+
+    /// Takes point `i` out: its edges are flipped away until it has three (inside) or none can
+    /// be (on the hull: the points around it then bound the hull), its triangles give way to
+    /// the one of its three neighbours (inside) or to nothing (the hull), and the edges around
+    /// are flipped until each is locally Delaunay. Returns a triangle near where it was, or
+    /// `None` where it cannot be taken out (the caller rebuilds).
+    fn remove_vertex(
+        &mut self,
+        i: u32,
+        fan: &mut Vec<u32>,
+    ) -> Result<Option<usize>, GeometryError> {
+        let hull = self.on_hull(i);
+        let mut touched = Vec::new();
+        if !self.flip_away(i, hull, fan, &mut touched)? {
+            return Ok(None);
+        }
+        let b = self.mesh.as_mut().expect("called with a mesh");
+        let link = |e: u32| b.triangles[next_halfedge(e as usize)];
+        let chain: Vec<u32> = fan.iter().map(|&e| link(e)).collect();
+        let outer: Vec<u32> = fan
+            .iter()
+            .map(|&e| b.halfedges[next_halfedge(e as usize)])
+            .collect();
+        let dead: Vec<usize>;
+        let mut near;
+        if hull {
+            // The fan's far edges become the hull, from the point before `i` to the one after.
+            if outer.contains(&EMPTY) {
+                return Ok(None);
+            }
+            let last = b.triangles[prev_halfedge(fan[fan.len() - 1] as usize)];
+            let mut after: Vec<u32> = chain[1..].to_vec();
+            after.push(last);
+            for (k, (&o, &to)) in outer.iter().zip(&after).enumerate() {
+                let from = chain[k];
+                b.halfedges[o as usize] = EMPTY;
+                b.hull_tri[to as usize] = o;
+                b.hull_next[to as usize] = from;
+                b.hull_prev[from as usize] = to;
+                if k > 0 {
+                    b.hash_point(from, b.hash_key(b.xy(from)));
+                }
+            }
+            b.hull_next[i as usize] = i;
+            dead = fan.iter().map(|&e| e as usize / 3).collect();
+            near = outer[0] as usize / 3;
+            b.fill_dents(chain[1..].to_vec(), &mut touched);
+        } else {
+            // Three triangles around `i` become the one of its neighbours.
+            let t = fan[0] as usize / 3;
+            b.triangles[3 * t..3 * t + 3].copy_from_slice(&chain);
+            for (k, &o) in outer.iter().enumerate() {
+                b.link((3 * t + k) as u32, o);
+                if o == EMPTY {
+                    b.hull_tri[chain[k] as usize] = (3 * t + k) as u32;
+                }
+            }
+            touched.extend(triangle_edges(3 * t));
+            dead = fan[1..].iter().map(|&e| e as usize / 3).collect();
+            near = t;
+        }
+        for &t in &dead {
+            b.halfedges[3 * t..3 * t + 3].fill(EMPTY);
+        }
+        touched.retain(|&e| !dead.contains(&(e as usize / 3)));
+        self.lawson(&mut touched)?;
+        self.drop_triangles(dead, &mut near);
+        let b = self.mesh.as_ref().expect("called with a mesh");
+        Ok((!b.triangles.is_empty()).then_some(near))
+    }
+
+    /// Flips edges out of point `i` away while its fan has more than three triangles (inside)
+    /// or while one can be (on the hull); leaves in `fan` the half-edges out of it, counter-
+    /// clockwise (on the hull, from its hull edge on), and in `touched` the flipped triangles'
+    /// edges. False where no edge can be flipped inside (the caller rebuilds).
+    fn flip_away(
+        &mut self,
+        i: u32,
+        hull: bool,
+        fan: &mut Vec<u32>,
+        touched: &mut Vec<u32>,
+    ) -> Result<bool, GeometryError> {
+        loop {
+            if !self.fan_of(i, hull, fan)? {
+                return Ok(false);
+            }
+            let d = fan.len();
+            if !hull && d == 3 {
+                return Ok(true);
+            }
+            let b = self.mesh.as_mut().expect("called with a mesh");
+            let p = b.xy(i);
+            // Edge k can go where the points on either side of it see `i` and its far end on
+            // opposite sides: the quadrilateral is convex.
+            let flippable = |k: usize| {
+                let e = fan[k] as usize;
+                let at = |e: usize| b.xy(b.triangles[e]);
+                let (a, c) = (
+                    at(prev_halfedge(b.halfedges[e] as usize)),
+                    at(prev_halfedge(e)),
+                );
+                let (o1, o2) = (orient(a, c, p), orient(a, c, at(next_halfedge(e))));
+                (o1 > 0.0 && o2 < 0.0) || (o1 < 0.0 && o2 > 0.0)
+            };
+            let candidates = if hull { 1..d } else { 0..d };
+            let Some(k) = candidates.into_iter().find(|&k| flippable(k)) else {
+                return Ok(hull);
+            };
+            let e = fan[k] as usize;
+            let o = b.halfedges[e] as usize;
+            flip(&mut b.triangles, &mut b.halfedges, &mut b.hull_tri, e, o);
+            self.from[i as usize] = next_halfedge(o) as u32;
+            touched.extend(triangle_edges(e).into_iter().chain(triangle_edges(o)));
+        }
+    }
+
+    /// Fills `fan` with the half-edges out of point `i`: all around it (inside), or from its
+    /// hull edge on to the last before the hull again (on the hull). False where it is not
+    /// found.
+    fn fan_of(&mut self, i: u32, hull: bool, fan: &mut Vec<u32>) -> Result<bool, GeometryError> {
+        if !hull {
+            return self.star_of(i, fan);
+        }
+        let b = self.mesh.as_ref().expect("called with a mesh");
+        fan.clear();
+        let mut e = b.hull_tri[i as usize] as usize;
+        if e >= b.triangles.len() || b.triangles[e] != i {
+            return Ok(false);
+        }
+        loop {
+            fan.push(e as u32);
+            let o = b.halfedges[prev_halfedge(e)];
+            if o == EMPTY {
+                return Ok(true);
+            }
+            e = o as usize;
+            if fan.len() > b.triangles.len() {
+                return Err(GeometryError::IterationLimit {
+                    step: "vertex fan",
+                    limit: b.triangles.len(),
+                });
+            }
+        }
+    }
+
+    /// Removes the triangles `dead` (unlinked already), moving the last ones into their slots;
+    /// `near` follows its triangle.
+    fn drop_triangles(&mut self, mut dead: Vec<usize>, near: &mut usize) {
+        let b = self.mesh.as_mut().expect("called with a mesh");
+        dead.sort_unstable_by(|a, b| b.cmp(a));
+        for t in dead {
+            let last = b.triangles.len() / 3 - 1;
+            if t != last {
+                for k in 0..3 {
+                    let (old, new) = (3 * last + k, 3 * t + k);
+                    let v = b.triangles[old];
+                    let h = b.halfedges[old];
+                    b.triangles[new] = v;
+                    b.halfedges[new] = h;
+                    if h != EMPTY {
+                        b.halfedges[h as usize] = new as u32;
+                    } else if b.hull_tri[v as usize] == old as u32 {
+                        b.hull_tri[v as usize] = new as u32;
+                    }
+                    if self.from[v as usize] == old as u32 {
+                        self.from[v as usize] = new as u32;
+                    }
+                }
+                if *near == last {
+                    *near = t;
+                }
+            }
+            b.triangles.truncate(3 * last);
+            b.halfedges.truncate(3 * last);
+        }
+    }
+
+    /// Fills `star` with the half-edges out of point `i`, counter-clockwise; false where `i`
+    /// is no interior vertex. The hint in `from` is checked and, where flips made it stale,
+    /// found again by walking from it to the point (flips are local: it is near).
+    fn star_of(&mut self, i: u32, star: &mut Vec<u32>) -> Result<bool, GeometryError> {
+        let b = self.mesh.as_ref().expect("called with a mesh");
+        let len = b.triangles.len();
+        let h = self.from[i as usize] as usize;
+        let e0 = if h < len && b.triangles[h] == i {
+            h
+        } else {
+            let start = if h < len { h / 3 } else { 0 };
+            let Some(t) = b.locate(start, b.xy(i))? else {
+                return Ok(false);
+            };
+            let Some(e) = (3 * t..3 * t + 3).find(|&e| b.triangles[e] == i) else {
+                return Ok(false);
+            };
+            self.from[i as usize] = e as u32;
+            e
+        };
+        star.clear();
+        let mut e = e0;
+        loop {
+            star.push(e as u32);
+            let o = b.halfedges[prev_halfedge(e)];
+            if o == EMPTY {
+                return Ok(false); // an open star: on the hull after all
+            }
+            e = o as usize;
+            if e == e0 {
+                return Ok(true);
+            }
+            if star.len() > len {
+                return Err(GeometryError::IterationLimit {
+                    step: "vertex star",
+                    limit: len,
+                });
+            }
+        }
+    }
+
+    /// Lawson's flips from the half-edges on `stack` until every edge met is locally Delaunay.
+    fn lawson(&mut self, stack: &mut Vec<u32>) -> Result<(), GeometryError> {
+        let b = self.mesh.as_mut().expect("called with a mesh");
+        while let Some(e) = stack.pop() {
+            let e = e as usize;
+            let o = b.halfedges[e];
+            if o == EMPTY {
+                continue;
+            }
+            let o = o as usize;
+            let [v0, v1, v2] = [e, next_halfedge(e), prev_halfedge(e)].map(|e| b.triangles[e]);
+            let d = b.triangles[prev_halfedge(o)];
+            if incircle(b.xy(v0), b.xy(v1), b.xy(v2), b.xy(d)) <= 0.0 {
+                continue;
+            }
+            if b.flips_left == 0 {
+                return Err(GeometryError::IterationLimit {
+                    step: "Delaunay flips",
+                    limit: b.flip_budget,
+                });
+            }
+            b.flips_left -= 1;
+            flip(&mut b.triangles, &mut b.halfedges, &mut b.hull_tri, e, o);
+            // v0 and v1 lost the flipped edge; their other edges in the quadrilateral stay.
+            self.from[v0 as usize] = next_halfedge(o) as u32;
+            self.from[v1 as usize] = next_halfedge(e) as u32;
+            stack.extend([e, next_halfedge(e), o, next_halfedge(o)].map(|e| e as u32));
+        }
+        Ok(())
+    }
+}
+
+/// The three half-edges of the triangle of half-edge `e`.
+fn triangle_edges(e: usize) -> [u32; 3] {
+    let t = e - e % 3;
+    [t as u32, t as u32 + 1, t as u32 + 2]
+}
+
+/// The listed points' coordinates are finite and within [`crate::MAX_ABS_COORDINATE_M`].
+fn check_coordinates(
+    points: &[[f32; 3]],
+    which: impl Iterator<Item = u32>,
+) -> Result<(), GeometryError> {
+    for index in which {
+        for &c in &points[index as usize] {
+            let v = f64::from(c);
+            if !v.is_finite() || v.abs() > crate::MAX_ABS_COORDINATE_M {
+                return Err(GeometryError::InvalidPoint {
+                    index: index as usize,
+                    value: v,
+                });
+            }
+        }
+    }
+    Ok(())
 }
 
 /// spade's triangulation, to cross-check ours.

@@ -2,15 +2,16 @@
 //! everything the map holds ([`run_fused`]).
 //!
 //! The steps, each a method of [`FusedFrame`]: **register** the scan onto the map (the frame's
-//! poses move by the correction), **place** its points in the map and triangulate the map's top
-//! surface on a second thread while this one **classify**s the frame, let its classes **vote**,
+//! poses move by the correction), **place** its points in the map and bring the map's top
+//! surface and its triangulation (both kept between frames) up to date on a second thread while
+//! this one **classify**s the frame, let its classes **vote**,
 //! and **answer** with the geometry on the map's cells, a [`CloudKind::FusedMap`] (whose
 //! mechanisms are explained there). What can be wrong with the frame's input is found before the
 //! map changes; once its points are in and its classes cannot be, the map starts over.
 
 use std::time::{Duration, Instant};
 
-use landing_fusion::{Correction, NotRegistered, Placed, Scan, Surface, View};
+use landing_fusion::{Correction, MeshedSurface, NotRegistered, Placed, Scan, Surface, View};
 use landing_geometry::{CloudKind, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3};
@@ -24,7 +25,8 @@ use crate::Error;
 use crate::segmentation::Judged;
 
 /// Runs the pipeline on a fused stream's frame: the frame's points are added to the stream's
-/// `map` and its top surface triangulated on a second thread while the frame is classified
+/// `map` and its kept top surface and triangulation brought up to date on a second thread
+/// while the frame is classified
 /// ([`Judged::InStream`]), its classes then vote, and the answer is computed from all the map's
 /// points (what the approach has scanned so far) as a [`CloudKind::FusedMap`], keeping clear of
 /// the keep-out footprints of every frame the map remembers.
@@ -83,8 +85,9 @@ struct Surfaced {
     /// The surface's points in frame-local coordinates.
     local: Vec<[f32; 3]>,
     triangulated: Result<Triangulation, landing_geometry::GeometryError>,
-    /// Time spent placing the points and reading the surface.
+    /// Time spent placing the points.
     placing: Duration,
+    /// Time spent bringing the surface and its triangulation up to date.
     triangulation: Duration,
 }
 
@@ -160,8 +163,9 @@ impl FusedFrame<'_> {
         registered
     }
 
-    /// Places the scan's points in the map and triangulates the map's top surface on a second
-    /// thread while this one classifies the frame: votes do not move the map's points. The
+    /// Places the scan's points in the map and brings its top surface and the surface's
+    /// triangulation up to date on a second thread while this one classifies the frame: votes
+    /// do not move the map's points. The
     /// answer covers everything the map holds: what the approach has scanned of the roof (and
     /// around it) within the horizon, not only the current scan's footprint, which shrinks as
     /// the drone descends. The map starts over when either fails.
@@ -305,17 +309,27 @@ impl FusedFrame<'_> {
     }
 }
 
-/// Places the scan's points in the map and triangulates its top surface in frame-local
-/// coordinates (relative to `origin`), timing both.
+/// Places the scan's points in the map and brings its kept top surface and triangulation up to
+/// date (in the map's coordinates: relative to its origin, which is `origin`), timing both.
 fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -> Surfaced {
     let t = Instant::now();
     let placed = map.place(scan);
-    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
-    let surface = map.surface(everything);
-    let local = relative_to(&surface.points, origin);
     let placing = t.elapsed();
     let t = Instant::now();
-    let triangulated = landing_geometry::triangulate_points(&local);
+    let MeshedSurface {
+        surface,
+        points: local,
+        triangulation: triangulated,
+    } = map.meshed_surface();
+    debug_assert_eq!(
+        Some(origin),
+        (!surface.points.is_empty()).then(|| map.origin_for(scan)),
+        "the map's coordinates are relative to the frame's origin"
+    );
+    #[cfg(debug_assertions)]
+    if let Ok(kept) = &triangulated {
+        check_kept(&local, kept);
+    }
     Surfaced {
         placed,
         surface,
@@ -324,4 +338,19 @@ fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -
         placing,
         triangulation: t.elapsed(),
     }
+}
+
+/// Debug builds (the tests) check every kept triangulation against a fresh one of the same
+/// points: a Delaunay triangulation of them with the same number of triangles.
+#[cfg(debug_assertions)]
+fn check_kept(points: &[[f32; 3]], kept: &Triangulation) {
+    let xy: Vec<[f64; 2]> = points
+        .iter()
+        .map(|p| [f64::from(p[0]), f64::from(p[1])])
+        .collect();
+    if let Err(e) = kept.check_invariants(&xy, true) {
+        panic!("the kept triangulation is no Delaunay triangulation: {e}");
+    }
+    let fresh = landing_geometry::triangulate_points(points).map_or(0, |t| t.len());
+    assert_eq!(kept.len(), fresh, "kept and fresh triangle counts");
 }
