@@ -684,17 +684,28 @@ const ON_TIME: Duration = Duration::from_secs(2);
 /// no restart of the server.
 #[test]
 fn postgres_stopped_and_restarted_with_the_server_running() {
+    on_dedicated_postgres(&[], postgres_fault);
+}
+
+/// Runs `fault` on a PostgreSQL + PostGIS of the test's own with a fresh database, given the
+/// server's environment for it (`extra` settings added) and the recorded frames, on a
+/// two-thread runtime, in at most 90 s.
+fn on_dedicated_postgres<F: std::future::Future<Output = ()>>(
+    extra: &[(&str, String)],
+    fault: impl FnOnce(Arc<pg::PgServer>, Vec<(String, String)>, Arc<Vec<v1::Frame>>) -> F,
+) {
     let started = Instant::now();
     let db = Arc::new(pg::dedicated());
     let url = postgres_url(&db.create_database());
-    let env = catalog_env("URL", &url);
+    let mut env = catalog_env("URL", &url);
+    env.extend(extra.iter().map(|(k, v)| ((*k).to_owned(), v.clone())));
     let frames = recorded_frames();
     tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .unwrap()
-        .block_on(postgres_fault(db, env, frames));
+        .block_on(fault(db, env, frames));
     assert!(started.elapsed() < Duration::from_secs(90));
 }
 
@@ -864,22 +875,11 @@ const SEARCH_TIMEOUT: Duration = Duration::from_millis(500);
 /// database answers; after the thaw searches find sites again and writes resume.
 #[test]
 fn frozen_postgres_holds_no_search_past_its_deadline() {
-    let started = Instant::now();
-    let db = Arc::new(pg::dedicated());
-    let url = postgres_url(&db.create_database());
-    let mut env = catalog_env("URL", &url);
-    env.push((
-        "LANDING__CATALOG__SEARCH_TIMEOUT_S".into(),
-        SEARCH_TIMEOUT.as_secs_f64().to_string(),
-    ));
-    let frames = recorded_frames();
-    tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .unwrap()
-        .block_on(postgres_frozen(db, env, frames));
-    assert!(started.elapsed() < Duration::from_secs(90));
+    let timeout = SEARCH_TIMEOUT.as_secs_f64().to_string();
+    on_dedicated_postgres(
+        &[("LANDING__CATALOG__SEARCH_TIMEOUT_S", timeout)],
+        postgres_frozen,
+    );
 }
 
 async fn postgres_frozen(
