@@ -321,9 +321,8 @@ fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -
         points: local,
         triangulation: triangulated,
     } = map.meshed_surface();
-    debug_assert_eq!(
-        Some(origin),
-        (!surface.points.is_empty()).then(|| map.origin_for(scan)),
+    debug_assert!(
+        surface.points.is_empty() || map.origin_for(scan) == origin,
         "the map's coordinates are relative to the frame's origin"
     );
     #[cfg(debug_assertions)]
