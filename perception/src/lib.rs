@@ -1,5 +1,5 @@
 //! Camera perception for rooftop landing: decode a camera image, segment it into the paper's
-//! semantic classes with a MobileNetV2+FCN8s model run by ONNX Runtime, and give every LiDAR
+//! semantic classes with a MobileNetV2 + FCN4s model run by ONNX Runtime, and give every LiDAR
 //! point the class of the pixel it projects to.
 //!
 //! Main types:

@@ -65,7 +65,7 @@ fn info_describes_the_loaded_model() {
     assert!(info.sha256.chars().all(|c| c.is_ascii_hexdigit()));
     assert_eq!(info.execution_provider, ExecutionProvider::Cpu);
     assert_eq!((info.input_width, info.input_height), (256, 192));
-    assert_eq!(info.name, "mobilenet_fcn8s");
+    assert_eq!(info.name, "mobilenet_fcn4s");
     assert!(info.ort_library.is_file());
 }
 

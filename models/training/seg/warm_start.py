@@ -2,8 +2,9 @@
 
 The exporter folds every BatchNorm into the convolution before it, so an exported graph holds one
 weight and one bias per convolution, in the order the network runs them. Reloading maps the ONNX
-`Conv` nodes, in graph order, onto the network's `Conv2d` modules in forward order (skipping those marked `warm_start_skip`, which
-a larger head adds and zero-initialises), and turns each
+`Conv` nodes, in graph order, onto the network's `Conv2d` modules in forward order (from the
+smaller head it grew out of, skipping those marked `warm_start_skip`, which a larger head adds and
+zero-initialises), and turns each
 folded bias back into a BatchNorm that reproduces it:
 
     BN(x) = (x - m) / sqrt(v + eps) * g + b,  with m = mu, v = sigma^2 - eps, g = sigma, b = mu + bias
@@ -65,11 +66,15 @@ def load_onnx_weights(net: nn.Module, path: str, calibration: torch.Tensor) -> N
     """Loads the folded weights of `path` into `net` (same architecture and width), calibrating
     the recreated BatchNorms on `calibration` (normalised NCHW images)."""
     convs = _onnx_convs(path)
-    # Convolutions new to `net` (e.g. FCN4s's /4 scores) keep their own initialisation.
-    order = [c for c in _forward_order(net, calibration[:1])
-             if not getattr(c, "warm_start_skip", False)]
-    if len(order) != len(convs):
-        raise ValueError(f"{path} has {len(convs)} convolutions, the network {len(order)}")
+    # From a model of the same architecture every convolution loads; from the smaller head it
+    # grew out of (an FCN8s into an FCN4s), the convolutions new to `net` (the /4 scores) keep
+    # their own initialisation.
+    every = _forward_order(net, calibration[:1])
+    inherited = [c for c in every if not getattr(c, "warm_start_skip", False)]
+    order = next((o for o in (every, inherited) if len(o) == len(convs)), None)
+    if order is None:
+        raise ValueError(f"{path} has {len(convs)} convolutions, the network {len(every)} "
+                         f"({len(inherited)} without the ones a larger head adds)")
     bns = _bn_after(net)
     folded_bias: dict[nn.Conv2d, torch.Tensor] = {}
     with torch.no_grad():
