@@ -512,10 +512,25 @@ mod tests {
         let above = site([0.0, 0.0, 4.0, 12.0], [2.0, 9.0], 1.8, 31.0);
         assert_eq!(runs(&[roof.clone(), roof.clone(), above]), [1, 2, 1]);
         // Not on resolved ground: no streak, and the next answer starts again.
-        let tracked = streaks(&[], std::slice::from_ref(&roof), &[true], 13);
-        let off = streaks(&tracked, std::slice::from_ref(&roof), &[false], 13);
+        let tracked = streaks(
+            &[],
+            std::slice::from_ref(&roof),
+            &[true],
+            3 + WANDER_ANSWERS,
+        );
+        let off = streaks(
+            &tracked,
+            std::slice::from_ref(&roof),
+            &[false],
+            3 + WANDER_ANSWERS,
+        );
         assert_eq!(off[0].1.run, 0);
-        let again = streaks(&off[..0], std::slice::from_ref(&roof), &[true], 13);
+        let again = streaks(
+            &off[..0],
+            std::slice::from_ref(&roof),
+            &[true],
+            3 + WANDER_ANSWERS,
+        );
         assert_eq!(again[0].1.run, 1);
     }
 }
