@@ -457,6 +457,10 @@ impl Cell {
     }
 }
 
+/// Surfaces of at least this many points have their cells' classes looked up on two threads
+/// ([`FusionMap::classes_of`]).
+const PARALLEL_LOOKUPS: usize = 8192;
+
 /// Cells whose mean weighs at most this many points, so that the mean keeps following new
 /// scans (a drone's pose error changes slowly over an approach).
 const MAX_MEAN_WEIGHT: u16 = 64;
@@ -627,20 +631,40 @@ impl<K> FusionMap<K> {
         let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
         let weight = self.params.obstacle_weight;
         let resolving = self.params.max_pixel_footprint_m > 0.0;
-        let (classes, unresolved) = surface
-            .keys
-            .iter()
-            .map(|key| {
-                let Some(cell) = self.cells.get(key) else {
-                    return (0, false);
-                };
-                let class = decide(&cell.votes, &landable, weight);
+        let cells = &self.cells;
+        let of = |keys: &[[i32; 3]]| -> (Vec<u8>, Vec<bool>) {
+            (keys.iter())
+                .map(|key| {
+                    let Some(cell) = cells.get(key) else {
+                        return (0, false);
+                    };
+                    let class = decide(&cell.votes, &landable, weight);
+                    (
+                        class,
+                        resolving && !cell.resolved && landable[usize::from(class)],
+                    )
+                })
+                .unzip()
+        };
+        // A large surface's cells are looked up in two halves at once: a lookup is mostly a
+        // wait on memory, and this runs between the frame's classes and the answer.
+        let (mut classes, mut unresolved);
+        if surface.keys.len() < PARALLEL_LOOKUPS {
+            (classes, unresolved) = of(&surface.keys);
+        } else {
+            let (first, second) = surface.keys.split_at(surface.keys.len() / 2);
+            let (rest, rest_unresolved);
+            ((classes, unresolved), (rest, rest_unresolved)) = std::thread::scope(|threads| {
+                let half = threads.spawn(|| of(second));
+                let mine = of(first);
                 (
-                    class,
-                    resolving && !cell.resolved && landable[usize::from(class)],
+                    mine,
+                    half.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
                 )
-            })
-            .unzip();
+            });
+            classes.extend(rest);
+            unresolved.extend(rest_unresolved);
+        }
         (self.classified.then_some(classes), unresolved)
     }
 

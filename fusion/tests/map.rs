@@ -636,3 +636,59 @@ fn the_kept_mesh_is_repaired_in_place_on_an_approach() {
     assert_eq!(stats.repaired, 19, "{stats:?}");
     assert!(stats.moved > 10_000, "{stats:?}");
 }
+
+#[test]
+fn a_large_surface_gets_the_classes_its_parts_get() {
+    // 12,100 columns, past the size whose cells are looked up on two threads, with classes and
+    // fine views that vary from cell to cell; each quarter alone stays below that size.
+    let side = 110;
+    let points: Vec<[f64; 3]> = (0..side * side)
+        .map(|i| {
+            let (x, y) = (f64::from(i % side), f64::from(i / side));
+            [x * 0.5 - 27.4, y * 0.5 - 27.3, 30.037]
+        })
+        .collect();
+    let classes: Vec<u8> = (0..side * side)
+        .map(|i| [ROOFTOP, AC_UNIT, 0, ROOFTOP, 11][(i as usize * 7 / 3) % 5])
+        .collect();
+    let fine = |p: &[f64; 3]| (p[0] < p[1]).then_some(0.1);
+    let mut m = map();
+    m.insert(Scan {
+        view: Some(View(&fine)),
+        ..scan(0.0, &points, &classes)
+    });
+    let by_point = |pts: &[[f64; 3]], classes: &[u8], unresolved: &[bool]| {
+        let mut v: Vec<([u64; 3], u8, bool)> = (pts.iter().zip(classes).zip(unresolved))
+            .map(|((p, &c), &u)| (p.map(f64::to_bits), c, u))
+            .collect();
+        v.sort_unstable();
+        v
+    };
+    let everything = [[f64::NEG_INFINITY; 2], [f64::INFINITY; 2]];
+    let whole = m.fused(everything, landable);
+    assert_eq!(whole.points.len(), points.len());
+    let mut parts = Vec::new();
+    let (low, high) = ([-100.0, 0.0], [0.0, 100.0]);
+    for (x, y) in [(low, low), (low, high), (high, low), (high, high)] {
+        let bounds = [[x[0], y[0]], [x[1], y[1]]];
+        let part = m.fused(bounds, landable);
+        assert!(part.points.len() < 4000, "{} points", part.points.len());
+        parts.extend(by_point(
+            &part.points,
+            &part.classes.unwrap(),
+            &part.unresolved,
+        ));
+    }
+    parts.sort_unstable();
+    let whole = by_point(&whole.points, &whole.classes.unwrap(), &whole.unresolved);
+    assert_eq!(whole, parts);
+    assert!(whole.iter().any(|w| w.2) && whole.iter().any(|w| !w.2));
+    assert!(
+        whole
+            .iter()
+            .map(|w| w.1)
+            .collect::<std::collections::HashSet<_>>()
+            .len()
+            >= 3
+    );
+}

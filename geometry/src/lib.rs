@@ -382,12 +382,34 @@ pub fn detect(cloud: &Cloud<'_>, params: &Params) -> Result<Detection, GeometryE
     let t3 = Instant::now();
     timings.plane_extraction = t3 - t2;
 
-    let mut outlines = outlines(tri, &pts, &regions, cloud)?;
-    drop_no_roof(&mut regions, &mut outlines, &pts, cloud.classes);
+    // A fused map's keep-out disks are judged against its long-edged triangles ([`trust`]),
+    // gathered on a second thread while this one traces the polygons.
+    let trust_edge = cloud.kind.keep_out_trust_edge_m();
+    let (traced, mut gaps) = std::thread::scope(|threads| {
+        let gaps = (cloud.keep_clear.disks.is_some() && trust_edge > 0.0)
+            .then(|| threads.spawn(|| trust::Gaps::new(tri, &pts, &regions, trust_edge)));
+        let traced = outlines(tri, &pts, &regions, cloud).map(|outlines| {
+            let drop = levels::no_roof(&regions, &outlines.polygons, &pts, cloud.classes);
+            (outlines, drop)
+        });
+        let gaps = gaps.map(|g| {
+            g.join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+        });
+        (traced, gaps)
+    });
+    let (mut outlines, drop) = traced?;
+    if drop.contains(&true) {
+        let keep: Vec<bool> = drop.iter().map(|d| !d).collect();
+        drop_regions(&mut regions, &mut outlines, &keep);
+        if let Some(gaps) = &mut gaps {
+            gaps.keep_regions(&keep);
+        }
+    }
     let t4 = Instant::now();
     timings.polygon_extraction = t4 - t3;
 
-    let sites = safe_sites(tri, &pts, &regions, outlines, params, cloud)?;
+    let sites = safe_sites(&regions, outlines, params, cloud, gaps.as_ref())?;
     timings.polylabel = t4.elapsed();
 
     Ok(Detection {
@@ -512,20 +534,10 @@ fn outlines(
     })
 }
 
-/// Leaves out the regions (with their outlines) that the cloud's levels show are no roof
-/// ([`levels::no_roof`]).
-fn drop_no_roof(
-    regions: &mut regions::Regions,
-    outlines: &mut Outlines,
-    pts: &[[f64; 3]],
-    classes: Option<&[u8]>,
-) {
-    let drop = levels::no_roof(regions, &outlines.polygons, pts, classes);
-    if !drop.contains(&true) {
-        return;
-    }
-    let keep: Vec<bool> = drop.iter().map(|d| !d).collect();
-    regions.retain(&keep);
+/// Keeps the regions (with their outlines) whose `keep` is true: those the cloud's levels do not
+/// show to be no roof ([`levels::no_roof`]).
+fn drop_regions(regions: &mut regions::Regions, outlines: &mut Outlines, keep: &[bool]) {
+    regions.retain(keep);
     let mut k = keep.iter();
     outlines.polygons.retain(|_| *k.next().unwrap_or(&true));
     if let Some(parts) = &mut outlines.parts {
@@ -535,25 +547,22 @@ fn drop_no_roof(
 }
 
 /// The ranked sites: polylabel in each outline, clear of the cloud's keep-out disks. Where a
-/// fused map's points are dense they answer for the ground, and disks there bound nothing.
+/// fused map's points are dense they answer for the ground (`gaps`, made for such a map), and
+/// disks there bound nothing.
 fn safe_sites(
-    tri: &Triangulation,
-    pts: &[[f64; 3]],
     regions: &regions::Regions,
     outlines: Outlines,
     params: &Params,
     cloud: &Cloud<'_>,
+    gaps: Option<&trust::Gaps>,
 ) -> Result<Vec<LandingSite>, GeometryError> {
-    let trust_edge = cloud.kind.keep_out_trust_edge_m();
-    let gaps;
     let over_gaps;
-    let disks = match cloud.keep_clear.disks {
-        Some(inner) if trust_edge > 0.0 => {
-            gaps = trust::Gaps::new(tri, pts, regions, trust_edge);
-            over_gaps = trust::OverGaps { inner, gaps: &gaps };
+    let disks = match (cloud.keep_clear.disks, gaps) {
+        (Some(inner), Some(gaps)) => {
+            over_gaps = trust::OverGaps { inner, gaps };
             Some(&over_gaps as &dyn ranking::KeepOut)
         }
-        other => other,
+        (other, _) => other,
     };
     ranking::rank_sites(
         regions,

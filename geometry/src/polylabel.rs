@@ -280,21 +280,35 @@ impl DiskGrid {
             if ((k as f64 - 1.0) * self.cell).max(gap) - self.max_radius >= best {
                 break;
             }
+            if k == 0 {
+                best = self.nearest_rim(p, cj * self.cols + ci, best);
+                continue;
+            }
+            // Ring k: its top and bottom rows whole, then its two columns between them.
             let (i0, i1) = (ci.saturating_sub(k), (ci + k).min(self.cols - 1));
-            let (j0, j1) = (cj.saturating_sub(k), (cj + k).min(self.rows - 1));
-            for j in j0..=j1 {
+            let rows = [cj.checked_sub(k), Some(cj + k).filter(|&j| j < self.rows)];
+            for j in rows.into_iter().flatten() {
                 for i in i0..=i1 {
-                    if i.abs_diff(ci) != k && j.abs_diff(cj) != k {
-                        continue; // inside the ring, done before
-                    }
-                    let c = j * self.cols + i;
-                    for &d in &self.order[self.starts[c]..self.starts[c + 1]] {
-                        let disk = &self.disks[d];
-                        let dist = (p[0] - disk.center[0]).hypot(p[1] - disk.center[1]);
-                        best = best.min(dist - disk.radius);
-                    }
+                    best = self.nearest_rim(p, j * self.cols + i, best);
                 }
             }
+            let (j0, j1) = (cj.saturating_sub(k - 1), (cj + k - 1).min(self.rows - 1));
+            let columns = [ci.checked_sub(k), Some(ci + k).filter(|&i| i < self.cols)];
+            for i in columns.into_iter().flatten() {
+                for j in j0..=j1 {
+                    best = self.nearest_rim(p, j * self.cols + i, best);
+                }
+            }
+        }
+        best
+    }
+
+    /// `min(best, distance from p to the nearest rim of cell c's disks)`.
+    fn nearest_rim(&self, p: [f64; 2], c: usize, mut best: f64) -> f64 {
+        for &d in &self.order[self.starts[c]..self.starts[c + 1]] {
+            let disk = &self.disks[d];
+            let dist = (p[0] - disk.center[0]).hypot(p[1] - disk.center[1]);
+            best = best.min(dist - disk.radius);
         }
         best
     }
@@ -454,6 +468,36 @@ mod tests {
 
     fn square(x0: f64, y0: f64, s: f64) -> Vec<[f64; 2]> {
         vec![[x0, y0], [x0 + s, y0], [x0 + s, y0 + s], [x0, y0 + s]]
+    }
+
+    #[test]
+    fn the_disk_grid_finds_the_nearest_rim_as_a_scan_of_every_disk_does() {
+        // Seeded disks far from the origin, queries inside, beside and far outside their box,
+        // limits small and large: the ring search returns exactly the scan's minimum.
+        let mut rng = crate::synthetic::Pcg32::new(7);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.unit();
+        let origin = [-2.0e6, 4.0e5];
+        for round in 1..60 {
+            let disks: Vec<Disk> = (0..round * 2)
+                .map(|_| Disk {
+                    center: [origin[0] + u(0.0, 30.0), origin[1] + u(0.0, 12.0)],
+                    radius: u(0.0, 2.5),
+                })
+                .collect();
+            let grid = DiskGrid::new(&disks).expect("finite disks");
+            for _ in 0..200 {
+                let p = [origin[0] + u(-40.0, 70.0), origin[1] + u(-40.0, 50.0)];
+                let limit = u(0.0, 80.0);
+                let scan = (disks.iter())
+                    .map(|d| (p[0] - d.center[0]).hypot(p[1] - d.center[1]) - d.radius)
+                    .fold(limit, f64::min);
+                assert_eq!(
+                    grid.clearance(p, limit),
+                    scan,
+                    "round {round}, {p:?}, {limit}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -32,6 +32,10 @@ pub(crate) struct Gaps {
     triangles: Vec<[[f64; 2]; 3]>,
     /// Each triangle's box: min x, min y, max x, max y.
     boxes: Vec<[f64; 4]>,
+    /// Each triangle's region (its index in the regions given to [`Gaps::new`]).
+    region: Vec<u32>,
+    /// Whether each of those regions still counts ([`Gaps::keep_regions`]).
+    live: Vec<bool>,
 }
 
 impl Gaps {
@@ -48,17 +52,35 @@ impl Gaps {
                 (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) > limit * limit
             })
         };
-        let triangles: Vec<[[f64; 2]; 3]> = (regions.regions.iter())
-            .flat_map(|r| &r.triangles)
-            .map(|&t| {
+        let mut region = Vec::new();
+        let mut triangles = Vec::new();
+        for (r, found) in regions.regions.iter().enumerate() {
+            for &t in &found.triangles {
                 let v = &tri.triangles[3 * t as usize..3 * t as usize + 3];
-                std::array::from_fn(|i| {
+                let corners = std::array::from_fn(|i| {
                     let p = points[v[i] as usize];
                     [p[0], p[1]]
-                })
-            })
-            .filter(long)
-            .collect();
+                });
+                if long(&corners) {
+                    triangles.push(corners);
+                    region.push(r as u32);
+                }
+            }
+        }
+        Self::binned(triangles, region, regions.regions.len(), limit)
+    }
+
+    /// Leaves out the triangles of the regions whose `keep` is false (one flag per region given
+    /// to [`Gaps::new`]).
+    pub(crate) fn keep_regions(&mut self, keep: &[bool]) {
+        for (live, keep) in self.live.iter_mut().zip(keep) {
+            *live &= keep;
+        }
+    }
+
+    /// `triangles`, each of region `region[t]` of `regions`, binned on cells of `limit` (or
+    /// coarser).
+    fn binned(triangles: Vec<[[f64; 2]; 3]>, region: Vec<u32>, regions: usize, limit: f64) -> Self {
         let boxes: Vec<[f64; 4]> = (triangles.iter())
             .map(|c| {
                 let [x, y] = [0, 1].map(|k| c.map(|p| p[k]));
@@ -94,12 +116,17 @@ impl Gaps {
             bins: Vec::new(),
             triangles,
             boxes: Vec::new(),
+            region,
+            live: vec![true; regions],
         };
         // Two passes: count each cell's triangles, then place them.
         let mut start = vec![0u32; nx * ny + 1];
         for b in &boxes {
-            for i in gaps.cells(b) {
-                start[i + 1] += 1;
+            let ([x0, x1], rows) = gaps.span(b);
+            for y in rows {
+                for c in &mut start[y * nx + x0 + 1..=y * nx + x1 + 1] {
+                    *c += 1;
+                }
             }
         }
         for i in 1..start.len() {
@@ -108,9 +135,12 @@ impl Gaps {
         let mut next = start.clone();
         let mut bins = vec![0; start[nx * ny] as usize];
         for (t, b) in boxes.iter().enumerate() {
-            for i in gaps.cells(b) {
-                bins[next[i] as usize] = t as u32;
-                next[i] += 1;
+            let ([x0, x1], rows) = gaps.span(b);
+            for y in rows {
+                for n in &mut next[y * nx + x0..=y * nx + x1] {
+                    bins[*n as usize] = t as u32;
+                    *n += 1;
+                }
             }
         }
         gaps.start = start;
@@ -119,24 +149,19 @@ impl Gaps {
         gaps
     }
 
-    /// The index of every cell that the box (min x, min y, max x, max y) touches; parts of the
-    /// box beyond the grid go to its border cells.
-    fn cells(&self, b: &[f64; 4]) -> impl Iterator<Item = usize> + use<> {
+    /// The columns (first, last) and the rows of the cells that the box (min x, min y, max x,
+    /// max y) touches; parts of the box beyond the grid go to its border cells.
+    fn span(&self, b: &[f64; 4]) -> ([usize; 2], std::ops::RangeInclusive<usize>) {
         let at = |v: f64, k: usize| {
             // Negative and NaN go to 0, beyond the grid to its last cell.
             let n = [self.nx, self.ny][k];
             ((((v - self.origin[k]) / self.cell).floor()).max(0.0) as usize).min(n - 1)
         };
-        let (xs, ys, nx) = (
-            at(b[0], 0)..=at(b[2], 0),
-            at(b[1], 1)..=at(b[3], 1),
-            self.nx,
-        );
-        ys.flat_map(move |y| xs.clone().map(move |x| y * nx + x))
+        ([at(b[0], 0), at(b[2], 0)], at(b[1], 1)..=at(b[3], 1))
     }
 
-    /// Whether the disk meets one of the long-edged triangles. A disk with a non-finite
-    /// coordinate always counts.
+    /// Whether the disk meets one of the long-edged triangles of a region that still counts. A
+    /// disk with a non-finite coordinate always counts.
     pub(crate) fn touches(&self, d: &Disk) -> bool {
         if !(d.center.iter().all(|c| c.is_finite()) && d.radius.is_finite()) {
             return true;
@@ -146,15 +171,20 @@ impl Gaps {
         }
         let [x, y] = d.center;
         let reach = [x - d.radius, y - d.radius, x + d.radius, y + d.radius];
-        self.cells(&reach).any(|i| {
-            let bin = &self.bins[self.start[i] as usize..self.start[i + 1] as usize];
-            bin.iter().any(|&t| {
+        let ([x0, x1], rows) = self.span(&reach);
+        // Cells are stored row by row, so one row's run of cells is one run of `bins`, often
+        // empty: most disks lie where no triangle is long.
+        rows.into_iter().any(|row| {
+            let run = self.start[row * self.nx + x0] as usize
+                ..self.start[row * self.nx + x1 + 1] as usize;
+            self.bins[run].iter().any(|&t| {
                 let b = &self.boxes[t as usize];
                 // Most of a cell's triangles lie apart from the disk's box.
                 b[0] <= reach[2]
                     && reach[0] <= b[2]
                     && b[1] <= reach[3]
                     && reach[1] <= b[3]
+                    && self.live[self.region[t as usize] as usize]
                     && meets(&self.triangles[t as usize], d)
             })
         })
@@ -215,5 +245,46 @@ mod tests {
         let cw = [t[0], t[2], t[1]];
         assert!(meets(&cw, &disk(1.0, 1.0, 0.1)));
         assert!(!meets(&cw, &disk(3.0, 3.0, 1.0)));
+    }
+
+    #[test]
+    fn the_grid_finds_exactly_the_disks_that_meet_a_triangle() {
+        // Seeded random triangles of every size, far from the origin, and disks of every size,
+        // some beyond the grid: the binned search answers as a scan of every triangle does.
+        let mut rng = crate::synthetic::Pcg32::new(43);
+        let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.unit();
+        let origin = [5.0e5, -3.0e6];
+        for round in 0..40 {
+            let limit = u(0.1, 2.0);
+            let triangles: Vec<[[f64; 2]; 3]> = (0..round * 3)
+                .map(|_| {
+                    let (cx, cy, size) = (u(0.0, 40.0), u(0.0, 40.0), u(0.05, 12.0));
+                    std::array::from_fn(|_| {
+                        [
+                            origin[0] + cx + u(-size, size),
+                            origin[1] + cy + u(-size, size),
+                        ]
+                    })
+                })
+                .collect();
+            // Three regions, the last one left out.
+            let region: Vec<u32> = (0..triangles.len() as u32).map(|t| t % 3).collect();
+            let mut gaps = Gaps::binned(triangles.clone(), region.clone(), 3, limit);
+            gaps.keep_regions(&[true, true, false]);
+            let (mut met, mut missed) = (0, 0);
+            for _ in 0..400 {
+                let d = Disk {
+                    center: [origin[0] + u(-10.0, 50.0), origin[1] + u(-10.0, 50.0)],
+                    radius: u(0.0, 6.0),
+                };
+                let scan = (triangles.iter().zip(&region)).any(|(t, &r)| r != 2 && meets(t, &d));
+                assert_eq!(gaps.touches(&d), scan, "round {round}, {d:?}");
+                if scan { met += 1 } else { missed += 1 }
+            }
+            assert!(
+                round < 4 || (met > 0 && missed > 0),
+                "round {round}: {met} met, {missed} missed"
+            );
+        }
     }
 }

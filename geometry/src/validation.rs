@@ -232,31 +232,53 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
     let cells_per_side = ((segs.len() as f64).sqrt().ceil() as usize).clamp(1, 1024);
     let cell = span / cells_per_side as f64;
     let index = |v: f64, o: f64| (((v - o) / cell) as usize).min(cells_per_side - 1);
-    let mut grid: Vec<Vec<u32>> = vec![Vec::new(); cells_per_side * cells_per_side];
-    for (k, s) in segs.iter().enumerate() {
-        let (x0, x1) = (
-            index(s.a[0].min(s.b[0]), lo[0]),
-            index(s.a[0].max(s.b[0]), lo[0]),
-        );
-        let (y0, y1) = (
-            index(s.a[1].min(s.b[1]), lo[1]),
-            index(s.a[1].max(s.b[1]), lo[1]),
-        );
-        for x in x0..=x1 {
-            for y in y0..=y1 {
-                grid[y * cells_per_side + x].push(k as u32);
+    // Each edge's box of cells, then the edges of each cell, row by row (counted, then placed).
+    let boxes: Vec<[usize; 4]> = (segs.iter())
+        .map(|s| {
+            [
+                index(s.a[0].min(s.b[0]), lo[0]),
+                index(s.a[1].min(s.b[1]), lo[1]),
+                index(s.a[0].max(s.b[0]), lo[0]),
+                index(s.a[1].max(s.b[1]), lo[1]),
+            ]
+        })
+        .collect();
+    let mut start = vec![0usize; cells_per_side * cells_per_side + 1];
+    for &[x0, y0, x1, y1] in &boxes {
+        for y in y0..=y1 {
+            for c in &mut start[y * cells_per_side + x0 + 1..=y * cells_per_side + x1 + 1] {
+                *c += 1;
             }
         }
     }
-    let mut checked = std::collections::HashSet::new();
-    for cell in &grid {
-        for (i, &p) in cell.iter().enumerate() {
-            for &q in &cell[i + 1..] {
-                let (p, q) = if p < q { (p, q) } else { (q, p) };
-                if !checked.insert((p, q)) {
-                    continue;
+    for i in 1..start.len() {
+        start[i] += start[i - 1];
+    }
+    let mut next = start.clone();
+    let mut grid = vec![0u32; start[start.len() - 1]];
+    for (k, &[x0, y0, x1, y1]) in boxes.iter().enumerate() {
+        for y in y0..=y1 {
+            for n in &mut next[y * cells_per_side + x0..=y * cells_per_side + x1] {
+                grid[*n] = k as u32;
+                *n += 1;
+            }
+        }
+    }
+    for y in 0..cells_per_side {
+        for x in 0..cells_per_side {
+            let c = y * cells_per_side + x;
+            let cell = &grid[start[c]..start[c + 1]];
+            for (i, &p) in cell.iter().enumerate() {
+                for &q in &cell[i + 1..] {
+                    // A pair is checked once, in the first cell (row by row) that both edges'
+                    // boxes share: the corner of the two boxes' overlap.
+                    let (bp, bq) = (&boxes[p as usize], &boxes[q as usize]);
+                    if x != bp[0].max(bq[0]) || y != bp[1].max(bq[1]) {
+                        continue;
+                    }
+                    let (p, q) = if p < q { (p, q) } else { (q, p) };
+                    check_pair(&segs[p as usize], &segs[q as usize], &lens)?;
                 }
-                check_pair(&segs[p as usize], &segs[q as usize], &lens)?;
             }
         }
     }

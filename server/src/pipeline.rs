@@ -219,14 +219,18 @@ pub fn run_pipeline(
     let start = Instant::now();
     let world = to_world(&frame.cloud);
     let origin = landing_fusion::centre(&world, frame.cloud.pose.translation.vector.into());
-    let c = classify(
-        frame,
+    let segmented = segment(
         decode(frame, options, pipeline)?,
-        &to_local(origin),
-        relative_to(&world, origin),
         options,
         pipeline,
         Judged::Alone,
+    )?;
+    let c = classify(
+        frame,
+        segmented,
+        &to_local(origin),
+        relative_to(&world, origin),
+        options,
     )?;
     let keep_out: Vec<&ObstacleRays> = c.obstacles.iter().collect();
     let coarse = c
@@ -324,18 +328,23 @@ fn decode(frame: &Frame, options: &FrameOptions, pipeline: &Pipeline) -> Result<
     })
 }
 
-/// Classifies the [`decode`]d frame's points per the mode and how the frame is `judged`
-/// ([`Judged`]). `points` is the cloud in the coordinates the frame's poses give once moved by
-/// `by` (frame-local ones from the callers); the frame itself is not copied.
-fn classify(
-    frame: &Frame,
+/// A [`decode`]d frame with its image segmented when the mode says so ([`segment`]).
+struct Segmented {
+    mode: SegmentationMode,
+    masks: Option<segmentation::Masks>,
+    class_mask: Option<landing_perception::ClassMask>,
+    judged: Judged,
+    timings: StageTimings,
+}
+
+/// Segments the [`decode`]d frame's image, in model mode, as the frame is `judged`
+/// ([`Judged`]). Needs no pose, so a fused stream registers its scan meanwhile.
+fn segment(
     decoded: Decoded,
-    by: &Isometry3<f64>,
-    points: Vec<[f32; 3]>,
     options: &FrameOptions,
     pipeline: &Pipeline,
     judged: Judged,
-) -> Result<Classified, Error> {
+) -> Result<Segmented, Error> {
     let Decoded {
         mode,
         image,
@@ -346,47 +355,76 @@ fn classify(
         decode: time,
         ..StageTimings::default()
     };
-    let decoded = frame.image.as_ref().zip(image.as_ref());
-    let class_mask = frame.class_image.as_ref().zip(class_mask.as_ref());
+    let masks = match (mode, &image, &pipeline.segmenter) {
+        (SegmentationMode::Model, Some(image), Some(segmenter)) => {
+            let masks = segmenter.segment(image, judged, &options.params.landable_classes)?;
+            timings.segmentation = Some(masks.time);
+            Some(masks)
+        }
+        // resolve_mode checked both; classify reports their absence rather than panic.
+        _ => None,
+    };
+    Ok(Segmented {
+        mode,
+        masks,
+        class_mask,
+        judged,
+        timings,
+    })
+}
+
+/// Classifies the [`segment`]ed frame's points per the mode. `points` is the cloud in the
+/// coordinates the frame's poses give once moved by `by` (frame-local ones from the callers);
+/// the frame itself is not copied.
+fn classify(
+    frame: &Frame,
+    segmented: Segmented,
+    by: &Isometry3<f64>,
+    points: Vec<[f32; 3]>,
+    options: &FrameOptions,
+) -> Result<Classified, Error> {
+    let Segmented {
+        mode,
+        masks,
+        class_mask,
+        judged,
+        mut timings,
+    } = segmented;
     let landable = &options.params.landable_classes;
-    let mut obstacles = None;
-    let mut view = None;
-    let classes: Option<Vec<u8>> = match mode {
+    let from_mask = match mode {
         SegmentationMode::Model => {
-            let ((camera, rgb), segmenter) = match (&decoded, &pipeline.segmenter) {
-                (Some(d), Some(segmenter)) => (d, segmenter),
-                // resolve_mode checked both; keep the error rather than panic.
-                _ => return Err(Error::Internal("model mode without image or model".into())),
+            // resolve_mode checked both; keep the error rather than panic.
+            let (Some(masks), Some(camera)) = (masks, &frame.image) else {
+                return Err(Error::Internal("model mode without image or model".into()));
             };
-            let out =
-                segmenter.classify(camera, by * camera.pose, rgb, &points, landable, judged)?;
-            timings.segmentation = Some(out.segmentation);
-            timings.classification = Some(out.classification);
-            obstacles = Some(out.obstacles);
-            view = Some(out.view);
-            Some(out.classes)
+            Some(masks.classify(camera, by * camera.pose, &points, landable))
         }
         SegmentationMode::ClassImage => {
-            let Some((camera, mask)) = &class_mask else {
+            let (Some(mask), Some(camera)) = (class_mask, &frame.class_image) else {
                 return Err(Error::Internal(
                     "class image mode without a class image".into(),
                 ));
             };
-            let out = segmentation::classify_with_mask(
+            Some(segmentation::classify_with_mask(
                 camera,
                 by * camera.pose,
-                mask,
+                &mask,
                 &points,
                 landable,
                 judged,
-            );
-            timings.classification = Some(out.classification);
-            obstacles = Some(out.obstacles);
-            view = Some(out.view);
-            Some(out.classes)
+            ))
         }
-        SegmentationMode::PointClasses => frame.cloud.classes.clone(),
-        SegmentationMode::None | SegmentationMode::Unspecified => None,
+        SegmentationMode::PointClasses | SegmentationMode::None | SegmentationMode::Unspecified => {
+            None
+        }
+    };
+    let (classes, obstacles, view) = match from_mask {
+        Some(out) => {
+            timings.classification = Some(out.classification);
+            (Some(out.classes), Some(out.obstacles), Some(out.view))
+        }
+        None if mode == SegmentationMode::PointClasses => (frame.cloud.classes.clone(), None, None),
+        None => (None, None, None),
     };
     Ok(Classified {
         points,

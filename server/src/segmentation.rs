@@ -16,7 +16,7 @@ use crate::Error;
 use crate::config::SegmentationConfig;
 use crate::frame::{CameraImage, ImagePixels};
 
-/// Classes of every point of a frame, from the model, with the time of each step.
+/// Classes of every point of a frame, from a class mask, with the time it took.
 #[derive(Debug, Clone)]
 pub struct Classified {
     pub classes: Vec<u8>,
@@ -24,7 +24,6 @@ pub struct Classified {
     pub obstacles: ObstacleRays,
     /// The view the classes came from.
     pub view: PointView,
-    pub segmentation: Duration,
     pub classification: Duration,
 }
 
@@ -137,17 +136,14 @@ impl Segmenter {
 
     /// Segments the decoded `image` at the input sizes `judged` names (every one, or a fused
     /// stream's first alone) and fuses the masks (a pixel is landable only where every size
-    /// says so). The obstacle rays always come from the fused mask; the points
-    /// take their classes from the mask `judged` names, then as [`classify_with_mask`] does.
-    pub fn classify(
+    /// says so); [`Masks::classify`] then gives the points their classes. Needs no pose: a
+    /// fused stream registers its scan meanwhile.
+    pub fn segment(
         &self,
-        camera: &CameraImage,
-        pose: Isometry3<f64>,
         image: &RgbImage,
-        world_points: &[[f32; 3]],
-        landable: &[u8],
         judged: Judged,
-    ) -> Result<Classified, Error> {
+        landable: &[u8],
+    ) -> Result<Masks, Error> {
         let t0 = Instant::now();
         let session =
             &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
@@ -155,30 +151,57 @@ impl Segmenter {
             Judged::Alone => &self.sizes[..],
             Judged::InStream => &self.sizes[..1],
         };
-        let masks = sizes
+        let mut masks = sizes
             .iter()
             .map(|&(w, h)| session.segment_at(image, w, h))
             .collect::<Result<Vec<_>, PerceptionError>>()
             .map_err(|e| model_error(&e))?;
-        let mask = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
+        let fused = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
             .ok_or_else(|| Error::Internal("no segmentation input size".into()))?;
-        let segmentation = t0.elapsed();
-        let for_points = match judged {
-            Judged::Alone => &mask,
-            Judged::InStream => &masks[0],
-        };
-        Ok(Classified {
-            segmentation,
-            ..classify_with_masks(
-                camera,
-                pose,
-                for_points,
-                &mask,
-                world_points,
-                landable,
-                judged,
-            )
+        Ok(Masks {
+            finest: masks.swap_remove(0),
+            fused,
+            judged,
+            time: t0.elapsed(),
         })
+    }
+}
+
+/// An image's class masks ([`Segmenter::segment`]).
+#[derive(Debug)]
+pub struct Masks {
+    /// At the finest input size.
+    finest: ClassMask,
+    /// Every size's, fused.
+    fused: ClassMask,
+    judged: Judged,
+    /// Time spent segmenting.
+    pub time: Duration,
+}
+
+impl Masks {
+    /// Gives the points their classes from the mask the image was `judged` for, then as
+    /// [`classify_with_mask`] does; the obstacle rays always come from the fused mask.
+    pub fn classify(
+        &self,
+        camera: &CameraImage,
+        pose: Isometry3<f64>,
+        world_points: &[[f32; 3]],
+        landable: &[u8],
+    ) -> Classified {
+        let for_points = match self.judged {
+            Judged::Alone => &self.fused,
+            Judged::InStream => &self.finest,
+        };
+        classify_with_masks(
+            camera,
+            pose,
+            for_points,
+            &self.fused,
+            world_points,
+            landable,
+            self.judged,
+        )
     }
 }
 
@@ -270,7 +293,6 @@ fn classify_with_masks(
             mask_width: point_mask.width(),
             mask_height: point_mask.height(),
         },
-        segmentation: Duration::ZERO,
         classification: t.elapsed(),
     }
 }

@@ -1,11 +1,11 @@
 //! A fused stream's frame: its scan laid onto the stream's map, and the answer computed from
 //! everything the map holds ([`run_fused`]).
 //!
-//! The steps, each a method of [`FusedFrame`]: **register** the scan onto the map (the frame's
-//! poses move by the correction), **place** its points in the map and bring the map's top
-//! surface and its triangulation (both kept between frames) up to date on a second thread while
-//! this one **classify**s the frame, let its classes **vote**,
-//! and **answer** with the geometry on the map's cells, a [`CloudKind::FusedMap`] (whose
+//! The steps, each a method of [`FusedFrame`]: on a second thread, **register** the scan onto
+//! the map (the frame's poses move by the correction) and **place** its points in the map,
+//! bringing the map's top surface and its triangulation (both kept between frames) up to date,
+//! while this one segments the frame's image; then **classify** the points, let their classes
+//! **vote**, and **answer** with the geometry on the map's cells, a [`CloudKind::FusedMap`] (whose
 //! mechanisms are explained there). What can be wrong with the frame's input is found before the
 //! map changes; once its points are in and its classes cannot be, the map starts over.
 
@@ -19,15 +19,15 @@ use nalgebra::{Isometry3, Point3};
 use super::evidence::{MapSurface, evidence};
 use super::{
     Classified, Decoded, Frame, FrameOptions, FrameOutput, FusionSummary, Located, Pipeline,
-    StreamMap, classify, decode, locate, relative_to, to_local, to_world,
+    StreamMap, classify, decode, locate, relative_to, segment, to_local, to_world,
 };
 use crate::Error;
 use crate::segmentation::Judged;
 
-/// Runs the pipeline on a fused stream's frame: the frame's points are added to the stream's
-/// `map` and its kept top surface and triangulation brought up to date on a second thread
-/// while the frame is classified
-/// ([`Judged::InStream`]), its classes then vote, and the answer is computed from all the map's
+/// Runs the pipeline on a fused stream's frame: the frame's scan is registered, its points are
+/// added to the stream's `map` and its kept top surface and triangulation brought up to date on
+/// a second thread while the frame's image is segmented ([`Judged::InStream`]), its points'
+/// classes then vote, and the answer is computed from all the map's
 /// points (what the approach has scanned so far) as a [`CloudKind::FusedMap`], keeping clear of
 /// the keep-out footprints of every frame the map remembers.
 /// `reset` starts the map over first. A frame without a timestamp counts as taken at the
@@ -46,10 +46,9 @@ pub fn run_fused(
         pipeline,
         start: Instant::now(),
     };
-    let registered = step.register(map, reset);
     // What can be wrong with the frame's input is found before the map changes.
     let decoded = decode(frame, options, pipeline)?;
-    let (surfaced, classified) = step.place_and_classify(map, &registered, decoded)?;
+    let (registered, surfaced, classified) = step.place_and_classify(map, reset, decoded)?;
     let voted = step.vote(map, &registered, surfaced, classified);
     step.answer(map, registered, voted)
 }
@@ -121,6 +120,7 @@ impl FusedFrame<'_> {
     /// move by the correction, so its classes and keep-out footprints land where its points do.
     /// A map about to start over has nothing to register to.
     fn register(&self, map: &StreamMap, reset: bool) -> Registered {
+        let start = Instant::now();
         let mut points = to_world(&self.frame.cloud);
         let time_s = self
             .frame
@@ -139,7 +139,7 @@ impl FusedFrame<'_> {
             Some(_) => Err(NotRegistered::Nothing),
             None => map.register(&points, taken.sensor),
         };
-        let time = self.start.elapsed();
+        let time = start.elapsed();
         let correction = registration
             .as_ref()
             .map_or_else(|_| Isometry3::identity(), Correction::isometry);
@@ -163,40 +163,36 @@ impl FusedFrame<'_> {
         registered
     }
 
-    /// Places the scan's points in the map and brings its top surface and the surface's
-    /// triangulation up to date on a second thread while this one classifies the frame: votes
-    /// do not move the map's points. The
-    /// answer covers everything the map holds: what the approach has scanned of the roof (and
-    /// around it) within the horizon, not only the current scan's footprint, which shrinks as
-    /// the drone descends. The map starts over when either fails.
+    /// Registers the scan, places its points in the map and brings the map's top surface and
+    /// the surface's triangulation up to date on a second thread while this one segments the
+    /// frame's image (which needs no pose), then classifies the points: votes do not move the
+    /// map's points. The answer covers everything the map holds: what the approach has scanned
+    /// of the roof (and around it) within the horizon, not only the current scan's footprint,
+    /// which shrinks as the drone descends. The map starts over when either fails.
     fn place_and_classify(
         &self,
         map: &mut StreamMap,
-        registered: &Registered,
+        reset: bool,
         decoded: Decoded,
-    ) -> Result<(Surfaced, Classified), Error> {
-        let origin = registered.origin;
-        let by = to_local(origin) * registered.correction;
-        let scan = self.scan(registered);
-        let (classified, surfaced) = std::thread::scope(|threads| {
-            let surfacing = threads.spawn(|| place(map, &scan, origin));
-            let classified = classify(
-                self.frame,
-                decoded,
-                &by,
-                relative_to(&registered.points, origin),
-                self.options,
-                self.pipeline,
-                Judged::InStream,
-            );
-            (classified, surfacing.join())
+    ) -> Result<(Registered, Surfaced, Classified), Error> {
+        let (segmented, placed) = std::thread::scope(|threads| {
+            let placing = threads.spawn(|| {
+                let registered = self.register(map, reset);
+                let surfaced = place(map, &self.scan(&registered), registered.origin);
+                (registered, surfaced)
+            });
+            let segmented = segment(decoded, self.options, self.pipeline, Judged::InStream);
+            (segmented, placing.join())
         });
-        let Ok(surfaced) = surfaced else {
+        let Ok((registered, surfaced)) = placed else {
             map.clear();
             return Err(Error::Internal("fusing the frame's points panicked".into()));
         };
-        match classified {
-            Ok(classified) => Ok((surfaced, classified)),
+        let origin = registered.origin;
+        let by = to_local(origin) * registered.correction;
+        let points = relative_to(&registered.points, origin);
+        match segmented.and_then(|s| classify(self.frame, s, &by, points, self.options)) {
+            Ok(classified) => Ok((registered, surfaced, classified)),
             Err(e) => {
                 // The scan's points are in and its classes cannot be: start the map over.
                 map.clear();
