@@ -169,9 +169,8 @@ fn fused_points_take_the_finest_mask_and_keep_out_its_obstacles() {
         .collect();
     let landable = &options.params.landable_classes;
     let classify = |segmenter: &segmentation::Segmenter, judged| {
-        segmenter
-            .classify(camera, camera.pose, &rgb, &points, landable, judged)
-            .unwrap()
+        let masks = segmenter.segment(&rgb, judged, landable).unwrap();
+        masks.classify(camera, camera.pose, &points, landable)
     };
     let guarded = classify(&segmenter, Judged::Alone);
     let finest = classify(&segmenter, Judged::InStream);
