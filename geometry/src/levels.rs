@@ -126,7 +126,7 @@ fn outer(polygon: &Polygon) -> Polygon {
 }
 
 /// Whether region `r` lies within [`STREET_LEVEL_M`] of the lowest level of the scan around it
-/// ([`lowest_level`]), where points classed ground lie, and another region at least as large
+/// ([`street_level_below`]), where points classed ground lie, and another region at least as large
 /// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level.
 pub fn is_street_level(
     regions: &Regions,
@@ -159,13 +159,11 @@ fn street_level<'g>(
     if !higher {
         return false;
     }
-    let Some(low) = lowest_level(points, [cx, cy]) else {
+    let Some(low) = street_level_below(points, [cx, cy], z) else {
         return false;
     };
-    let low_enough = z - low < STREET_LEVEL_M;
-    if !low_enough
-        || !(regions.regions.iter().zip(polygons))
-            .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
+    if !(regions.regions.iter().zip(polygons))
+        .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
     {
         return false;
     }
@@ -179,19 +177,29 @@ fn street_level<'g>(
     on_street >= MIN_GROUND_POINTS
 }
 
-/// The lowest level of the points within [`STREET_RADIUS_M`] of `at`: the
-/// [`LOW_QUANTILE`] of their heights (a few stray returns below the street do not move it);
-/// `None` without [`MIN_GROUND_POINTS`] points.
-fn lowest_level(points: &[[f64; 3]], [cx, cy]: [f64; 2]) -> Option<f64> {
+/// The lowest level of the points within [`STREET_RADIUS_M`] of `at`, the [`LOW_QUANTILE`] of
+/// their heights (a few stray returns below the street do not move it), when it lies within
+/// [`STREET_LEVEL_M`] of `z`; `None` without [`MIN_GROUND_POINTS`] points or when it lies lower.
+/// A roof's is lower, and is known from a count alone: when more of the points than the
+/// quantile's rank lie that far below `z`, so does the quantile.
+fn street_level_below(points: &[[f64; 3]], [cx, cy]: [f64; 2], z: f64) -> Option<f64> {
     let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
-    let mut heights: Vec<f64> = (points.iter())
-        .filter(|p| (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2)
-        .map(|p| p[2])
-        .collect();
-    if heights.len() < MIN_GROUND_POINTS {
+    let near = |p: &&[f64; 3]| (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2;
+    // `z - h` falls as `h` rises (rounding keeps the order), so the quantile's `z - low` is at
+    // least that of one of the points counted here.
+    let below = |h: f64| z - h >= STREET_LEVEL_M;
+    let (n, lower) = (points.iter().filter(near)).fold((0, 0), |(n, lower), p| {
+        (n + 1, lower + usize::from(below(p[2])))
+    });
+    if n < MIN_GROUND_POINTS {
         return None;
     }
-    let k = ((heights.len() - 1) as f64 * LOW_QUANTILE).round() as usize;
+    let k = ((n - 1) as f64 * LOW_QUANTILE).round() as usize;
+    if lower > k {
+        return None;
+    }
+    // At most k points lie that far below: the quantile does not.
+    let mut heights: Vec<f64> = points.iter().filter(near).map(|p| p[2]).collect();
     let (_, &mut level, _) = heights.select_nth_unstable_by(k, f64::total_cmp);
     Some(level)
 }
@@ -366,6 +374,52 @@ mod tests {
     /// [`LOW_QUANTILE`] of the points): points classed ground far below that level are not a
     /// street at it, so the lower roof stays. (The count once took every ground point less than
     /// [`STREET_LEVEL_M`] above the level, those far below included, and dropped such roofs.)
+    #[test]
+    fn the_street_level_is_the_quantile_of_the_heights_around_when_it_is_near() {
+        // Seeded clouds of roofs and streets at every height around z, some exactly a street
+        // level below it: the count's shortcut answers as the quantile of every height does.
+        let mut rng = crate::synthetic::Pcg32::new(11);
+        for round in 0..400 {
+            let n = 10 + (rng.next_u32() % 400) as usize;
+            let z = 20.0 + rng.unit();
+            // Every other round, all points near and as many a street level below as the
+            // quantile's rank, one fewer or one more.
+            let rank = ((n - 1) as f64 * LOW_QUANTILE).round() as usize;
+            let lower = (rank + (rng.next_u32() % 3) as usize).saturating_sub(1);
+            let points: Vec<[f64; 3]> = (0..n)
+                .map(|i| {
+                    if round % 2 == 0 {
+                        let h = if i < lower {
+                            z - STREET_LEVEL_M - rng.unit()
+                        } else {
+                            z
+                        };
+                        return [10.0 * rng.unit(), 10.0 * rng.unit(), h];
+                    }
+                    let h = match rng.next_u32() % 4 {
+                        0 => z - STREET_LEVEL_M,
+                        1 => z - 10.0 * rng.unit(),
+                        2 => z - STREET_LEVEL_M + 0.1 * (rng.unit() - 0.5),
+                        _ => z + 3.0 * (rng.unit() - 0.5),
+                    };
+                    [70.0 * rng.unit() - 20.0, 70.0 * rng.unit() - 20.0, h]
+                })
+                .collect();
+            let at = [25.0 * rng.unit(), 25.0 * rng.unit()];
+            let near = |p: &&[f64; 3]| {
+                (p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2) <= STREET_RADIUS_M.powi(2)
+            };
+            let mut heights: Vec<f64> = points.iter().filter(near).map(|p| p[2]).collect();
+            let want = (heights.len() >= MIN_GROUND_POINTS)
+                .then(|| {
+                    let k = ((heights.len() - 1) as f64 * LOW_QUANTILE).round() as usize;
+                    *heights.select_nth_unstable_by(k, f64::total_cmp).1
+                })
+                .filter(|low| z - low < STREET_LEVEL_M);
+            assert_eq!(street_level_below(&points, at, z), want, "round {round}");
+        }
+    }
+
     #[test]
     fn ground_far_below_the_lowest_level_is_no_street_at_it() {
         let mut cloud = (Vec::new(), Vec::new());
