@@ -218,3 +218,69 @@ fn ranked(mut sites: Vec<(usize, LandingSite)>, max_sites: usize) -> Vec<Landing
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::Pcg32;
+
+    #[test]
+    fn the_sites_are_those_of_every_region_ranked() {
+        // Seeded squares and L-shapes of every size, some holed, and keep-out disks on them: the
+        // search that stops once the best sites beat every remaining bound keeps what judging
+        // every region and ranking them keeps.
+        let mut rng = Pcg32::new(5);
+        for round in 0..60 {
+            let n = 1 + (rng.next_u32() % 14) as usize;
+            let mut polygons = Vec::new();
+            let mut regions = Regions::default();
+            for i in 0..n {
+                let (x, y, side) = (30.0 * i as f64, 5.0 * rng.unit(), 0.5 + 12.0 * rng.unit());
+                let mut shell = vec![[x, y], [x + side, y], [x + side, y + side], [x, y + side]];
+                if rng.next_u32().is_multiple_of(2) {
+                    shell.insert(3, [x + side / 2.0, y + side]);
+                    shell.insert(4, [x + side / 2.0, y + side / 2.0]);
+                    shell[5] = [x, y + side / 2.0];
+                }
+                let holes = if rng.next_u32().is_multiple_of(3) {
+                    let (hx, hy) = (x + side / 4.0, y + side / 8.0);
+                    let s = side / 10.0;
+                    vec![vec![[hx, hy], [hx, hy + s], [hx + s, hy + s], [hx + s, hy]]]
+                } else {
+                    Vec::new()
+                };
+                polygons.push(Polygon { shell, holes });
+                regions.regions.push(Region {
+                    triangles: vec![i as u32],
+                    mean: [x, y, 10.0],
+                    normal: [0.0, 0.0, 1.0],
+                    point_count: 3,
+                });
+            }
+            let disks: Vec<Disk> = (0..(rng.next_u32() % 30))
+                .map(|_| Disk {
+                    center: [30.0 * n as f64 * rng.unit(), 15.0 * rng.unit()],
+                    radius: 2.0 * rng.unit(),
+                })
+                .collect();
+            let keep_out = |_: [f64; 3], _: [f64; 3], _: [f64; 4]| disks.clone();
+            let params = RankingParams {
+                max_sites: 1 + (rng.next_u32() % 5) as usize,
+                min_hole_area_m2: 0.05,
+                ..RankingParams::default()
+            };
+            let found = rank_sites(&regions, polygons.clone(), None, &params, Some(&keep_out));
+            let every: Vec<(usize, LandingSite)> = candidates(polygons, &params)
+                .into_iter()
+                .filter_map(|c| {
+                    let r = c.region;
+                    site_of(&regions.regions[r], c, None, Some(&keep_out), &params)
+                        .unwrap()
+                        .map(|s| (r, s))
+                })
+                .collect();
+            let want = ranked(every, params.max_sites);
+            assert_eq!(found.unwrap(), want, "round {round}");
+        }
+    }
+}
