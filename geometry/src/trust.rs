@@ -23,7 +23,8 @@ const MAX_CELLS: f64 = 1.0e6;
 #[derive(Debug)]
 pub(crate) struct Gaps {
     origin: [f64; 2],
-    cell: f64,
+    /// Cells per metre.
+    per_metre: f64,
     nx: usize,
     ny: usize,
     /// Cell `c`'s triangles are `bins[start[c]..start[c + 1]]`, indices into `triangles`.
@@ -109,7 +110,7 @@ impl Gaps {
         };
         let mut gaps = Self {
             origin: lo,
-            cell,
+            per_metre: 1.0 / cell,
             nx,
             ny,
             start: Vec::new(),
@@ -120,10 +121,10 @@ impl Gaps {
             live: vec![true; regions],
         };
         // Two passes: count each cell's triangles, then place them.
+        let spans: Vec<[usize; 4]> = boxes.iter().map(|b| gaps.span(b)).collect();
         let mut start = vec![0u32; nx * ny + 1];
-        for b in &boxes {
-            let ([x0, x1], rows) = gaps.span(b);
-            for y in rows {
+        for &[x0, x1, y0, y1] in &spans {
+            for y in y0..=y1 {
                 for c in &mut start[y * nx + x0 + 1..=y * nx + x1 + 1] {
                     *c += 1;
                 }
@@ -134,9 +135,8 @@ impl Gaps {
         }
         let mut next = start.clone();
         let mut bins = vec![0; start[nx * ny] as usize];
-        for (t, b) in boxes.iter().enumerate() {
-            let ([x0, x1], rows) = gaps.span(b);
-            for y in rows {
+        for (t, &[x0, x1, y0, y1]) in spans.iter().enumerate() {
+            for y in y0..=y1 {
                 for n in &mut next[y * nx + x0..=y * nx + x1] {
                     bins[*n as usize] = t as u32;
                     *n += 1;
@@ -149,15 +149,16 @@ impl Gaps {
         gaps
     }
 
-    /// The columns (first, last) and the rows of the cells that the box (min x, min y, max x,
-    /// max y) touches; parts of the box beyond the grid go to its border cells.
-    fn span(&self, b: &[f64; 4]) -> ([usize; 2], std::ops::RangeInclusive<usize>) {
+    /// The first and last column and the first and last row of the cells that the box (min x,
+    /// min y, max x, max y) touches; parts of the box beyond the grid go to its border cells.
+    /// Boxes and disks are placed by the same monotone rule, so overlapping ones share a cell.
+    fn span(&self, b: &[f64; 4]) -> [usize; 4] {
         let at = |v: f64, k: usize| {
             // Negative and NaN go to 0, beyond the grid to its last cell.
             let n = [self.nx, self.ny][k];
-            ((((v - self.origin[k]) / self.cell).floor()).max(0.0) as usize).min(n - 1)
+            ((((v - self.origin[k]) * self.per_metre).floor()).max(0.0) as usize).min(n - 1)
         };
-        ([at(b[0], 0), at(b[2], 0)], at(b[1], 1)..=at(b[3], 1))
+        [at(b[0], 0), at(b[2], 0), at(b[1], 1), at(b[3], 1)]
     }
 
     /// Whether the disk meets one of the long-edged triangles of a region that still counts. A
@@ -171,10 +172,10 @@ impl Gaps {
         }
         let [x, y] = d.center;
         let reach = [x - d.radius, y - d.radius, x + d.radius, y + d.radius];
-        let ([x0, x1], rows) = self.span(&reach);
+        let [x0, x1, y0, y1] = self.span(&reach);
         // Cells are stored row by row, so one row's run of cells is one run of `bins`, often
         // empty: most disks lie where no triangle is long.
-        rows.into_iter().any(|row| {
+        (y0..=y1).any(|row| {
             let run = self.start[row * self.nx + x0] as usize
                 ..self.start[row * self.nx + x1 + 1] as usize;
             self.bins[run].iter().any(|&t| {
