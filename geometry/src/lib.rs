@@ -348,7 +348,9 @@ pub enum GeometryError {
 /// [`GeometryError::InvalidPoint`]; a duplicated x/y position is triangulated once (its other
 /// copies are left out). A class list or flag list of the wrong length gives
 /// [`GeometryError::ClassCountMismatch`] or [`GeometryError::FlagCountMismatch`], a triangulation
-/// that names a point the cloud lacks [`GeometryError::InvalidMesh`].
+/// that names a point the cloud lacks [`GeometryError::InvalidMesh`]. On a fused map with
+/// keep-out disks it gathers the long-edged triangles ([`CloudKind::keep_out_trust_edge_m`]) on
+/// a second, scoped thread while this one traces the polygons; the answer does not depend on it.
 pub fn detect(cloud: &Cloud<'_>, params: &Params) -> Result<Detection, GeometryError> {
     params.validate()?;
     cloud.kind.validate()?;
