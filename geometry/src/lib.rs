@@ -39,6 +39,7 @@
 
 #![forbid(unsafe_code)]
 
+mod bins;
 pub mod boundary;
 pub mod class;
 mod cloud;

@@ -17,6 +17,7 @@
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
+use crate::bins::Bins;
 use crate::{GeometryError, Polygon};
 
 /// Parameters of [`polylabel`].
@@ -192,9 +193,8 @@ impl Field {
 /// Keep-out disks bucketed on a uniform grid, for "distance to the nearest rim" queries.
 struct DiskGrid {
     disks: Vec<Disk>,
-    /// Disk indices per cell, row-major; `starts[c]..starts[c + 1]` indexes `order`.
-    starts: Vec<usize>,
-    order: Vec<usize>,
+    /// Disk indices per cell, row-major.
+    bins: Bins,
     origin: [f64; 2],
     cell: f64,
     cols: usize,
@@ -228,29 +228,17 @@ impl DiskGrid {
             .max(1e-3);
         let cols = (w / cell) as usize + 1;
         let rows = (h / cell) as usize + 1;
-        let index = |d: &Disk| {
-            let c = (((d.center[0] - min[0]) / cell) as usize).min(cols - 1);
-            let r = (((d.center[1] - min[1]) / cell) as usize).min(rows - 1);
-            r * cols + c
-        };
-        let mut starts = vec![0usize; cols * rows + 1];
-        for d in &disks {
-            starts[index(d) + 1] += 1;
-        }
-        for i in 1..starts.len() {
-            starts[i] += starts[i - 1];
-        }
-        let mut fill = starts.clone();
-        let mut order = vec![0usize; disks.len()];
-        for (i, d) in disks.iter().enumerate() {
-            let c = index(d);
-            order[fill[c]] = i;
-            fill[c] += 1;
-        }
+        let spans: Vec<[usize; 4]> = (disks.iter())
+            .map(|d| {
+                let c = (((d.center[0] - min[0]) / cell) as usize).min(cols - 1);
+                let r = (((d.center[1] - min[1]) / cell) as usize).min(rows - 1);
+                [c, c, r, r]
+            })
+            .collect();
+        let bins = Bins::new(&spans, cols, rows);
         Some(Self {
             disks,
-            starts,
-            order,
+            bins,
             origin: min,
             cell,
             cols,
@@ -305,8 +293,8 @@ impl DiskGrid {
 
     /// `min(best, distance from p to the nearest rim of cell c's disks)`.
     fn nearest_rim(&self, p: [f64; 2], c: usize, mut best: f64) -> f64 {
-        for &d in &self.order[self.starts[c]..self.starts[c + 1]] {
-            let disk = &self.disks[d];
+        for &d in self.bins.run(c, c) {
+            let disk = &self.disks[d as usize];
             let dist = (p[0] - disk.center[0]).hypot(p[1] - disk.center[1]);
             best = best.min(dist - disk.radius);
         }

@@ -10,6 +10,7 @@
 //! long-edged triangles covers only that shown ground, and bounds no safe circle
 //! ([`crate::CloudKind::keep_out_trust_edge_m`], two cells for a fused map).
 
+use crate::bins::Bins;
 use crate::polylabel::{Disk, segment_distance2};
 use crate::ranking::KeepOut;
 use crate::regions::Regions;
@@ -27,9 +28,8 @@ pub(crate) struct Gaps {
     per_metre: f64,
     nx: usize,
     ny: usize,
-    /// Cell `c`'s triangles are `bins[start[c]..start[c + 1]]`, indices into `triangles`.
-    start: Vec<u32>,
-    bins: Vec<u32>,
+    /// Each cell's triangles, indices into `triangles`.
+    bins: Bins,
     triangles: Vec<[[f64; 2]; 3]>,
     /// Each triangle's box: min x, min y, max x, max y.
     boxes: Vec<[f64; 4]>,
@@ -113,38 +113,14 @@ impl Gaps {
             per_metre: 1.0 / cell,
             nx,
             ny,
-            start: Vec::new(),
-            bins: Vec::new(),
+            bins: Bins::default(),
             triangles,
             boxes: Vec::new(),
             region,
             live: vec![true; regions],
         };
-        // Two passes: count each cell's triangles, then place them.
         let spans: Vec<[usize; 4]> = boxes.iter().map(|b| gaps.span(b)).collect();
-        let mut start = vec![0u32; nx * ny + 1];
-        for &[x0, x1, y0, y1] in &spans {
-            for y in y0..=y1 {
-                for c in &mut start[y * nx + x0 + 1..=y * nx + x1 + 1] {
-                    *c += 1;
-                }
-            }
-        }
-        for i in 1..start.len() {
-            start[i] += start[i - 1];
-        }
-        let mut next = start.clone();
-        let mut bins = vec![0; start[nx * ny] as usize];
-        for (t, &[x0, x1, y0, y1]) in spans.iter().enumerate() {
-            for y in y0..=y1 {
-                for n in &mut next[y * nx + x0..=y * nx + x1] {
-                    bins[*n as usize] = t as u32;
-                    *n += 1;
-                }
-            }
-        }
-        gaps.start = start;
-        gaps.bins = bins;
+        gaps.bins = Bins::new(&spans, nx, ny);
         gaps.boxes = boxes;
         gaps
     }
@@ -176,9 +152,8 @@ impl Gaps {
         // Cells are stored row by row, so one row's run of cells is one run of `bins`, often
         // empty: most disks lie where no triangle is long.
         (y0..=y1).any(|row| {
-            let run = self.start[row * self.nx + x0] as usize
-                ..self.start[row * self.nx + x1 + 1] as usize;
-            self.bins[run].iter().any(|&t| {
+            let run = self.bins.run(row * self.nx + x0, row * self.nx + x1);
+            run.iter().any(|&t| {
                 let b = &self.boxes[t as usize];
                 // Most of a cell's triangles lie apart from the disk's box.
                 b[0] <= reach[2]

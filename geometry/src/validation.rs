@@ -5,6 +5,7 @@
 //! Entry points: [`check_polygon`] and [`check_detection`]. Orientation and intersection questions
 //! use exact `orient2d`.
 
+use crate::bins::Bins;
 use crate::boundary::{lex, ring_is_ccw};
 use crate::triangulation::coord;
 use crate::{Detection, GeometryError, Polygon};
@@ -232,48 +233,29 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
     let cells_per_side = ((segs.len() as f64).sqrt().ceil() as usize).clamp(1, 1024);
     let cell = span / cells_per_side as f64;
     let index = |v: f64, o: f64| (((v - o) / cell) as usize).min(cells_per_side - 1);
-    // Each edge's box of cells, then the edges of each cell, row by row (counted, then placed).
+    // Each edge's box of cells (first and last column, first and last row), then the edges of
+    // each cell.
     let boxes: Vec<[usize; 4]> = (segs.iter())
         .map(|s| {
             [
                 index(s.a[0].min(s.b[0]), lo[0]),
-                index(s.a[1].min(s.b[1]), lo[1]),
                 index(s.a[0].max(s.b[0]), lo[0]),
+                index(s.a[1].min(s.b[1]), lo[1]),
                 index(s.a[1].max(s.b[1]), lo[1]),
             ]
         })
         .collect();
-    let mut start = vec![0usize; cells_per_side * cells_per_side + 1];
-    for &[x0, y0, x1, y1] in &boxes {
-        for y in y0..=y1 {
-            for c in &mut start[y * cells_per_side + x0 + 1..=y * cells_per_side + x1 + 1] {
-                *c += 1;
-            }
-        }
-    }
-    for i in 1..start.len() {
-        start[i] += start[i - 1];
-    }
-    let mut next = start.clone();
-    let mut grid = vec![0u32; start[start.len() - 1]];
-    for (k, &[x0, y0, x1, y1]) in boxes.iter().enumerate() {
-        for y in y0..=y1 {
-            for n in &mut next[y * cells_per_side + x0..=y * cells_per_side + x1] {
-                grid[*n] = k as u32;
-                *n += 1;
-            }
-        }
-    }
+    let grid = Bins::new(&boxes, cells_per_side, cells_per_side);
     for y in 0..cells_per_side {
         for x in 0..cells_per_side {
             let c = y * cells_per_side + x;
-            let cell = &grid[start[c]..start[c + 1]];
+            let cell = grid.run(c, c);
             for (i, &p) in cell.iter().enumerate() {
                 for &q in &cell[i + 1..] {
                     // A pair is checked once, in the first cell (row by row) that both edges'
                     // boxes share: the corner of the two boxes' overlap.
                     let (bp, bq) = (&boxes[p as usize], &boxes[q as usize]);
-                    if x != bp[0].max(bq[0]) || y != bp[1].max(bq[1]) {
+                    if x != bp[0].max(bq[0]) || y != bp[2].max(bq[2]) {
                         continue;
                     }
                     let (p, q) = if p < q { (p, q) } else { (q, p) };
