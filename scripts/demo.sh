@@ -30,9 +30,10 @@ origin=40.7536,-73.9832
 
 # Ask the catalog what it knows near the sample's roofs.
 # The catalog's writer gathers a batch for up to catalog.flush_interval_s (1 s): ask until it
-# answers with a site, for at most 10 s, then show what it knows.
+# answers with a site this replay confirmed (an earlier run's are older), for at most 10 s, then
+# show everything it knows there.
 for _ in $(seq 1 50); do
-  "$bin/landing" sites --near "$origin" --radius 1000 --json --server "http://$addr" 2>/dev/null |
+  "$bin/landing" sites --near "$origin" --radius 1000 --max-age-s 30 --json --server "http://$addr" 2>/dev/null |
     grep -q '"distance_m"' && break
   sleep 0.2
 done
