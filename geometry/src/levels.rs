@@ -126,8 +126,9 @@ fn outer(polygon: &Polygon) -> Polygon {
 }
 
 /// Whether region `r` lies within [`STREET_LEVEL_M`] of the lowest level of the scan around it
-/// (the [`LOW_QUANTILE`] of the heights within [`STREET_RADIUS_M`]), where points classed ground lie, and another region at least as large
-/// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level.
+/// (the [`LOW_QUANTILE`] of the heights within [`STREET_RADIUS_M`]), where points classed ground
+/// lie, and another region at least as large stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above
+/// that level.
 pub fn is_street_level(
     regions: &Regions,
     polygons: &[Polygon],
