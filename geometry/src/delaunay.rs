@@ -420,6 +420,12 @@ impl Builder {
         self.hull_key.push(0);
     }
 
+    /// Whether point `v` is on the hull now (never was: `EMPTY`; has left it: itself).
+    fn on_hull(&self, v: u32) -> bool {
+        let next = self.hull_next[v as usize];
+        next != EMPTY && next != v
+    }
+
     #[inline]
     fn xy(&self, i: u32) -> [f64; 2] {
         self.points[i as usize]
@@ -1112,10 +1118,7 @@ impl KeptTriangulation {
 
     /// Whether point `i` is on the hull.
     fn on_hull(&self, i: u32) -> bool {
-        self.mesh.as_ref().is_some_and(|b| {
-            let next = b.hull_next[i as usize];
-            next != EMPTY && next != i
-        })
+        self.mesh.as_ref().is_some_and(|b| b.on_hull(i))
     }
 
     /// Takes point `i` out: its edges are flipped away until it has three (inside) or none can
@@ -1144,7 +1147,9 @@ impl KeptTriangulation {
         let mut near;
         if hull {
             // The fan's far edges become the hull, from the point before `i` to the one after.
-            if outer.contains(&EMPTY) {
+            // A point between those two already on the hull (`i` was on a straight stretch of
+            // it, with that point at the far end of its fan) would be on it twice.
+            if outer.contains(&EMPTY) || chain[1..].iter().any(|&v| b.on_hull(v)) {
                 return Ok(None);
             }
             let last = b.triangles[prev_halfedge(fan[fan.len() - 1] as usize)];

@@ -1,6 +1,7 @@
 //! The kept triangulation against a fresh one after every edit of seeded random edit sequences:
 //! points moved within their cells (a fusion map's means), moved farther, on the hull and inside,
-//! new points inside and outside the hull, duplicate positions, and point sets rebuilt.
+//! new points inside and outside the hull, duplicate positions, and point sets rebuilt; and
+//! a few points on a coarse lattice, where hull edges run through several points.
 
 use std::collections::HashSet;
 
@@ -39,7 +40,7 @@ fn check(kept: &KeptTriangulation, points: &[[f32; 3]], same_triangles: bool, wh
     let used: HashSet<u32> = tri.triangles.iter().copied().collect();
     let positions: HashSet<[u32; 2]> = points
         .iter()
-        .map(|p| [p[0].to_bits(), p[1].to_bits()])
+        .map(|p| [p[0], p[1]].map(|v| (v + 0.0).to_bits())) // -0.0 is 0.0
         .collect();
     if !tri.is_empty() {
         assert_eq!(
@@ -276,4 +277,80 @@ fn hull_points_and_folding_moves_are_taken_out_and_inserted_again() {
     let stats = kept.stats();
     assert_eq!((stats.rebuilt, stats.repaired), (1, 1), "{stats:?}");
     assert!(stats.reinserted >= 2, "{stats:?}");
+}
+
+#[test]
+fn a_point_leaving_a_straight_hull_edge_opposite_a_hull_corner_rebuilds() {
+    // Found by the `stream` fuzz target: points 1-5 on one line (the hull's long edge), point 0
+    // the hull's third corner. Point 3 moves inward off the line: taken out, the hull would
+    // run 2 → 0 → 4 with 0 on it twice.
+    let mut points = vec![
+        [-0.45, -7.05, 0.0],
+        [0.55, -9.05, 0.0],
+        [0.55, -8.05, 0.0],
+        [0.55, -7.05, 0.0],
+        [0.55, -6.05, 0.0],
+        [0.55, 8.95, 0.0],
+    ];
+    let mut kept = KeptTriangulation::new();
+    kept.update(&points, &[]).unwrap();
+    check(&kept, &points, false, "the fan");
+    points[3] = [0.547_573_45, -7.000_799_7, 0.0];
+    points.push([-2.440_293_8, -7.246_800_4, 0.0]);
+    kept.update(&points, &[3, 6]).unwrap();
+    check(&kept, &points, false, "moved off the line");
+}
+
+#[test]
+fn few_points_on_a_coarse_lattice_stay_delaunay_through_random_edits() {
+    // Many points collinear with hull edges and four on a circle: points on a 6 × 6 lattice,
+    // moved to other lattice points, nudged a little off them, or added, a few at a time.
+    let mut repaired = 0;
+    let mut reinserted = 0;
+    for seed in 0..4000u64 {
+        let mut g = Pcg32::new(1000 + seed);
+        let lattice = |g: &mut Pcg32| -> [f32; 3] {
+            [(g.next_u32() % 6) as f32, (g.next_u32() % 6) as f32, 0.0]
+        };
+        let mut points: Vec<[f32; 3]> =
+            (0..3 + g.next_u32() % 6).map(|_| lattice(&mut g)).collect();
+        let mut kept = KeptTriangulation::new();
+        kept.update(&points, &[]).unwrap();
+        check(&kept, &points, false, &format!("seed {seed}, start"));
+        for step in 0..12 {
+            let mut changed = Vec::new();
+            for _ in 0..1 + g.next_u32() % 3 {
+                let i = g.next_u32() as usize % points.len();
+                points[i] = match g.next_u32() % 3 {
+                    0 => lattice(&mut g),
+                    1 => {
+                        let [x, y, z] = points[i];
+                        [
+                            x + g.range(-0.1, 0.1) as f32,
+                            y + g.range(-0.1, 0.1) as f32,
+                            z,
+                        ]
+                    }
+                    _ => {
+                        let [x, y, z] = points[i];
+                        [x.round(), y.round(), z]
+                    }
+                };
+                changed.push(i as u32);
+            }
+            for _ in 0..g.next_u32() % 3 {
+                points.push(lattice(&mut g));
+            }
+            kept.update(&points, &changed).unwrap();
+            check(&kept, &points, false, &format!("seed {seed}, step {step}"));
+        }
+        repaired += kept.stats().repaired;
+        reinserted += kept.stats().reinserted;
+    }
+    // Duplicate positions rebuild; the rest must take the kept path.
+    eprintln!("repaired {repaired}, points reinserted {reinserted}");
+    assert!(
+        repaired > 10_000 && reinserted > 10_000,
+        "{repaired} {reinserted}"
+    );
 }
