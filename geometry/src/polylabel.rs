@@ -250,8 +250,9 @@ impl DiskGrid {
     /// `min(limit, distance from p to the nearest disk's rim)` (negative inside a disk): rings of
     /// cells around p's cell, stopping once no farther ring can beat the best found or `limit`.
     fn clearance(&self, p: [f64; 2], limit: f64) -> f64 {
-        let cx = ((p[0] - self.origin[0]) / self.cell).floor();
-        let cy = ((p[1] - self.origin[1]) / self.cell).floor();
+        let cx = (p[0] - self.origin[0]) / self.cell;
+        let cy = (p[1] - self.origin[1]) / self.cell;
+        // Clamped, the cast truncates as the floor would (no libm call); NaN gives 0.
         let clamp = |v: f64, n: usize| v.clamp(0.0, (n - 1) as f64) as usize;
         let (ci, cj) = (clamp(cx, self.cols), clamp(cy, self.rows));
         // Distance from p to the grid's box: no disk centre is nearer.
@@ -261,7 +262,12 @@ impl DiskGrid {
         ];
         let gx = (self.origin[0] - p[0]).max(p[0] - far[0]).max(0.0);
         let gy = (self.origin[1] - p[1]).max(p[1] - far[1]).max(0.0);
-        let gap = gx.hypot(gy);
+        // Inside the box (the usual case) no libm call.
+        let gap = if gx == 0.0 || gy == 0.0 {
+            gx + gy
+        } else {
+            gx.hypot(gy)
+        };
         let mut best = limit;
         for k in 0..self.cols.max(self.rows) {
             // Every cell of ring k is at least (k - 1) cells away from p, and no nearer than the box.

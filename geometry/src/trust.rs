@@ -130,9 +130,10 @@ impl Gaps {
     /// Boxes and disks are placed by the same monotone rule, so overlapping ones share a cell.
     fn span(&self, b: &[f64; 4]) -> [usize; 4] {
         let at = |v: f64, k: usize| {
-            // Negative and NaN go to 0, beyond the grid to its last cell.
+            // Negative and NaN go to 0 (the cast saturates, and truncates as the floor would
+            // at or above 0: no libm call), beyond the grid to its last cell.
             let n = [self.nx, self.ny][k];
-            ((((v - self.origin[k]) * self.per_metre).floor()).max(0.0) as usize).min(n - 1)
+            (((v - self.origin[k]) * self.per_metre) as usize).min(n - 1)
         };
         [at(b[0], 0), at(b[2], 0), at(b[1], 1), at(b[3], 1)]
     }

@@ -51,6 +51,10 @@ pub fn locate_in_ring(ring: &[[f64; 2]], p: [f64; 2]) -> Location {
     for i in 0..n {
         let a = ring[i];
         let b = ring[(i + 1) % n];
+        // An edge that does not span p's y can neither hold p nor be crossed by its ray.
+        if p[1] < a[1].min(b[1]) || p[1] > a[1].max(b[1]) {
+            continue;
+        }
         let o = robust::orient2d(coord(a), coord(b), coord(p));
         if o == 0.0
             && p[0] >= a[0].min(b[0])
@@ -113,12 +117,18 @@ pub fn check_polygon(polygon: &Polygon) -> Result<(), GeometryError> {
         }
     }
     check_segments(&rings)?;
+    let boxes: Vec<[f64; 4]> = polygon.holes.iter().map(|h| ring_box(h)).collect();
     for (h, hole) in polygon.holes.iter().enumerate() {
         if sample_location(hole, &polygon.shell) != Location::Inside {
             return bad(format!("hole {h} is not inside the shell"));
         }
+        // A hole whose first vertex lies outside another's box is outside that hole (rings are
+        // judged at their first vertex off the other's boundary).
+        let p = hole[0];
         for (k, other) in polygon.holes.iter().enumerate() {
-            if k != h && sample_location(hole, other) == Location::Inside {
+            let b = &boxes[k];
+            let near = b[0] <= p[0] && p[0] <= b[2] && b[1] <= p[1] && p[1] <= b[3];
+            if k != h && near && sample_location(hole, other) == Location::Inside {
                 return bad(format!("hole {h} lies inside hole {k}"));
             }
         }
@@ -172,6 +182,26 @@ pub fn check_detection(detection: &Detection) -> Result<(), GeometryError> {
     Ok(())
 }
 
+/// A ring's box: min x, min y, max x, max y.
+fn ring_box(ring: &[[f64; 2]]) -> [f64; 4] {
+    ring.iter().fold(
+        [
+            f64::INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NEG_INFINITY,
+        ],
+        |b, p| {
+            [
+                b[0].min(p[0]),
+                b[1].min(p[1]),
+                b[2].max(p[0]),
+                b[3].max(p[1]),
+            ]
+        },
+    )
+}
+
 fn ring_name(r: usize) -> String {
     if r == 0 {
         "shell".into()
@@ -210,16 +240,20 @@ struct Seg {
 }
 
 /// Simplicity of each ring and no crossing or overlap between rings, with a uniform grid so that
-/// large polygons stay near-linear.
+/// large polygons stay near-linear: cells about two edges long, as a ring's edges lie along a
+/// curve (a grid of one cell per edge would put about √n edges in each cell the ring crosses),
+/// and at most 16 cells an edge.
 fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
     let mut segs = Vec::new();
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    let mut length = 0.0;
     for (r, ring) in rings.iter().enumerate() {
         let n = ring.len();
         for i in 0..n {
             let (a, b) = (ring[i], ring[(i + 1) % n]);
             lo = [lo[0].min(a[0]), lo[1].min(a[1])];
             hi = [hi[0].max(a[0]), hi[1].max(a[1])];
+            length += (b[0] - a[0]).abs().max((b[1] - a[1]).abs());
             segs.push(Seg {
                 ring: r,
                 index: i,
@@ -230,7 +264,10 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
     }
     let lens: Vec<usize> = rings.iter().map(|r| r.len()).collect();
     let span = (hi[0] - lo[0]).max(hi[1] - lo[1]).max(1e-9);
-    let cells_per_side = ((segs.len() as f64).sqrt().ceil() as usize).clamp(1, 1024);
+    let by_length = span * segs.len() as f64 / (2.0 * length);
+    let by_count = 4.0 * (segs.len() as f64).sqrt();
+    // NaN (no length) gives 1 cell.
+    let cells_per_side = (by_length.min(by_count).ceil() as usize).clamp(1, 1024);
     let cell = span / cells_per_side as f64;
     let index = |v: f64, o: f64| (((v - o) / cell) as usize).min(cells_per_side - 1);
     // Each edge's box of cells (first and last column, first and last row), then the edges of
@@ -259,7 +296,15 @@ fn check_segments(rings: &[&Vec<[f64; 2]>]) -> Result<(), GeometryError> {
                         continue;
                     }
                     let (p, q) = if p < q { (p, q) } else { (q, p) };
-                    check_pair(&segs[p as usize], &segs[q as usize], &lens)?;
+                    let (s, t) = (&segs[p as usize], &segs[q as usize]);
+                    // Edges whose boxes are apart can neither cross, overlap nor touch.
+                    let apart = |k: usize| {
+                        s.a[k].max(s.b[k]) < t.a[k].min(t.b[k])
+                            || t.a[k].max(t.b[k]) < s.a[k].min(s.b[k])
+                    };
+                    if !(apart(0) || apart(1)) {
+                        check_pair(s, t, &lens)?;
+                    }
                 }
             }
         }
@@ -393,6 +438,14 @@ mod tests {
                         [0.0, 2.0],
                         [1.0, 1.0],
                     ],
+                    holes: vec![],
+                },
+            ),
+            (
+                // A vertex on another edge, where the two edges' boxes only touch.
+                "ring touching its own edge",
+                Polygon {
+                    shell: vec![[0.0, 0.0], [6.0, 0.0], [6.0, 4.0], [3.0, 0.0], [0.0, 4.0]],
                     holes: vec![],
                 },
             ),
