@@ -53,6 +53,20 @@ pub trait KeepOut {
     /// The disks (world x/y) on the plane through `point` with unit `normal` (z up) that reach
     /// into `bounds` (`[min x, min y, max x, max y]`, the polygon's box); others may be left out.
     fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk>;
+
+    /// [`KeepOut::disks_on_plane`] for a caller that wants fewer: every disk lying wholly within
+    /// a finite box (same layout) that `wanted` refuses may be left out too, so that a source
+    /// can skip whole groups of disks at once. By default, `disks_on_plane`.
+    fn wanted_disks_on_plane(
+        &self,
+        point: [f64; 3],
+        normal: [f64; 3],
+        bounds: [f64; 4],
+        wanted: &dyn Fn(&[f64; 4]) -> bool,
+    ) -> Vec<Disk> {
+        let _ = wanted;
+        self.disks_on_plane(point, normal, bounds)
+    }
 }
 
 impl<F: Fn([f64; 3], [f64; 3], [f64; 4]) -> Vec<Disk>> KeepOut for F {

@@ -138,6 +138,21 @@ impl Gaps {
         [at(b[0], 0), at(b[2], 0), at(b[1], 1), at(b[3], 1)]
     }
 
+    /// False only when no disk lying within the box (min x, min y, max x, max y) can meet a
+    /// long-edged triangle ([`Gaps::touches`]): no triangle is binned in the cells the box
+    /// covers, which hold every cell such a disk's own box covers. A box with a non-finite side
+    /// may hold anything.
+    pub(crate) fn may_touch(&self, b: &[f64; 4]) -> bool {
+        if !b.iter().all(|v| v.is_finite()) {
+            return true;
+        }
+        if self.triangles.is_empty() {
+            return false;
+        }
+        let [x0, x1, y0, y1] = self.span(b);
+        (y0..=y1).any(|row| !(self.bins.run(row * self.nx + x0, row * self.nx + x1)).is_empty())
+    }
+
     /// Whether the disk meets one of the long-edged triangles of a region that still counts. A
     /// disk with a non-finite coordinate always counts.
     pub(crate) fn touches(&self, d: &Disk) -> bool {
@@ -192,7 +207,9 @@ pub(crate) struct OverGaps<'a> {
 
 impl KeepOut for OverGaps<'_> {
     fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk> {
-        let mut disks = self.inner.disks_on_plane(point, normal, bounds);
+        // Disks where no long-edged triangle is near are not even cast.
+        let wanted = |b: &[f64; 4]| self.gaps.may_touch(b);
+        let mut disks = (self.inner).wanted_disks_on_plane(point, normal, bounds, &wanted);
         disks.retain(|d| self.gaps.touches(d));
         disks
     }
@@ -227,10 +244,13 @@ mod tests {
     #[test]
     fn the_grid_finds_exactly_the_disks_that_meet_a_triangle() {
         // Seeded random triangles of every size, far from the origin, and disks of every size,
-        // some beyond the grid: the binned search answers as a scan of every triangle does.
+        // some beyond the grid: the binned search answers as a scan of every triangle does, and
+        // a box the grid says no disk in it can touch holds none that does.
         let mut rng = crate::synthetic::Pcg32::new(43);
         let mut u = |lo: f64, hi: f64| lo + (hi - lo) * rng.unit();
         let origin = [5.0e5, -3.0e6];
+        // Boxes refused and not.
+        let mut refused = [0, 0];
         for round in 0..40 {
             let limit = u(0.1, 2.0);
             let triangles: Vec<[[f64; 2]; 3]> = (0..round * 3)
@@ -262,6 +282,29 @@ mod tests {
                 round < 4 || (met > 0 && missed > 0),
                 "round {round}: {met} met, {missed} missed"
             );
+            // A box it refuses holds no disk that touches: boxes of every size, each with disks
+            // inside it (on its corners and edges too).
+            for _ in 0..100 {
+                let (x, y) = (origin[0] + u(-10.0, 50.0), origin[1] + u(-10.0, 50.0));
+                let b = [x, y, x + u(0.0, 8.0), y + u(0.0, 8.0)];
+                if gaps.may_touch(&b) {
+                    refused[1] += 1;
+                    continue;
+                }
+                refused[0] += 1;
+                for _ in 0..20 {
+                    let radius = u(0.0, 0.5 * (b[2] - b[0]).min(b[3] - b[1]));
+                    let at = |lo: f64, hi: f64, k: f64| lo + radius + (hi - lo - 2.0 * radius) * k;
+                    let [kx, ky] =
+                        [0, 1].map(|_| [0.0, 1.0, u(0.0, 1.0)][(u(0.0, 3.0) as usize).min(2)]);
+                    let d = Disk {
+                        center: [at(b[0], b[2], kx), at(b[1], b[3], ky)],
+                        radius,
+                    };
+                    assert!(!gaps.touches(&d), "round {round}, {b:?}, {d:?}");
+                }
+            }
         }
+        assert!(refused[0] > 100 && refused[1] > 100, "{refused:?}");
     }
 }

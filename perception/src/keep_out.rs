@@ -234,7 +234,7 @@ impl ObstacleRays {
         bounds: [f64; 4],
     ) -> Vec<([f64; 2], f64)> {
         let mut out = Vec::new();
-        self.cast(point, normal, bounds, |_| true, &mut out);
+        self.cast(point, normal, bounds, |_| true, &|_| true, &mut out);
         out
     }
 
@@ -251,11 +251,16 @@ impl ObstacleRays {
     /// finer, and the far frame's false obstacles would shrink every circle); views from about
     /// the same range add up, so one frame's miss is not the last word; and what has left the
     /// newest camera's view is still kept clear of as the last cameras that saw it saw it.
+    ///
+    /// A caller that needs only some of the disks says so with `wanted`: where it refuses a box
+    /// (`[min x, min y, max x, max y]`), the tiles and blocks whose disks all lie within that box
+    /// are not cast. What is cast is as above.
     pub fn newest_view_on_plane(
         frames: &[&ObstacleRays],
         point: [f64; 3],
         normal: [f64; 3],
         bounds: [f64; 4],
+        wanted: &dyn Fn(&[f64; 4]) -> bool,
     ) -> Vec<([f64; 2], f64)> {
         let mut out = Vec::new();
         for (i, rays) in frames.iter().enumerate() {
@@ -270,14 +275,16 @@ impl ObstacleRays {
                         .iter()
                         .any(|n| (base - n.origin).norm() <= NEARER_VIEW * range && n.sees(base))
                 },
+                wanted,
                 &mut out,
             );
         }
         out
     }
 
-    /// [`ObstacleRays::on_plane`] for the blocks whose obstacle base `keep` accepts, into `out`.
-    /// Tiles whose blocks cannot reach `bounds` are skipped whole ([`Tile::may_reach`]); the
+    /// [`ObstacleRays::on_plane`] for the blocks whose obstacle base `keep` accepts, into `out`,
+    /// but for those whose disks all lie in a box `wanted` refuses. Tiles whose blocks cannot
+    /// reach `bounds` (or only in a refused box) are skipped whole ([`Tile::may_reach`]); the
     /// disks are those of casting every block.
     fn cast(
         &self,
@@ -285,12 +292,13 @@ impl ObstacleRays {
         normal: [f64; 3],
         bounds: [f64; 4],
         keep: impl Fn(&Point3<f64>) -> bool,
+        wanted: &dyn Fn(&[f64; 4]) -> bool,
         out: &mut Vec<([f64; 2], f64)>,
     ) {
         let plane = self.plane(point, normal, bounds);
         for tile in &self.tiles {
-            if tile.may_reach(&plane) {
-                self.cast_rays(tile.rays.clone(), &plane, &keep, out);
+            if tile.may_reach(&plane, wanted) {
+                self.cast_rays(tile.rays.clone(), &plane, &keep, wanted, out);
             }
         }
     }
@@ -320,6 +328,7 @@ impl ObstacleRays {
         rays: std::ops::Range<usize>,
         plane: &Plane,
         keep: impl Fn(&Point3<f64>) -> bool,
+        wanted: &dyn Fn(&[f64; 4]) -> bool,
         out: &mut Vec<([f64; 2], f64)>,
     ) {
         let Plane {
@@ -362,6 +371,12 @@ impl ObstacleRays {
                 || lo.x - radius > bounds[2]
                 || lo.y - radius > bounds[3]
             {
+                continue;
+            }
+            // Rounding: a disk's centre may land a hair outside the sweep's box.
+            let slack = radius * (1.0 + 1e-9) + 1e-6 * (1.0 + hit.x.abs() + hit.y.abs());
+            let reach = [lo.x - slack, lo.y - slack, hi.x + slack, hi.y + slack];
+            if reach.iter().all(|v| v.is_finite()) && !wanted(&reach) {
                 continue;
             }
             if !keep(&under) {
@@ -409,8 +424,9 @@ impl Tile {
     /// `camera height × half diagonal / (cos × max(cos, MIN_COS_INCIDENCE))`, is largest where
     /// the incidence's cos is least; that cos (the angle to the downward normal) has convex
     /// upper level sets, so its least value over the cone is at a corner. A tile with a corner
-    /// at or past the plane's horizon is not tested.
-    fn may_reach(&self, plane: &Plane) -> bool {
+    /// at or past the plane's horizon is not tested. Nor is it skipped when the disks' box is
+    /// not finite; else it is when `wanted` refuses that box.
+    fn may_reach(&self, plane: &Plane, wanted: &dyn Fn(&[f64; 4]) -> bool) -> bool {
         let Plane {
             normal: n,
             origin,
@@ -441,10 +457,12 @@ impl Tile {
         if !slack.is_finite() {
             return true;
         }
-        hi[0] + slack >= bounds[0]
-            && hi[1] + slack >= bounds[1]
-            && lo[0] - slack <= bounds[2]
-            && lo[1] - slack <= bounds[3]
+        let reach = [lo[0] - slack, lo[1] - slack, hi[0] + slack, hi[1] + slack];
+        reach[2] >= bounds[0]
+            && reach[3] >= bounds[1]
+            && reach[0] <= bounds[2]
+            && reach[1] <= bounds[3]
+            && (!reach.iter().all(|v| v.is_finite()) || wanted(&reach))
     }
 }
 
@@ -455,13 +473,14 @@ mod tests {
 
     /// Skipping the tiles that cannot reach a plane's bounds gives exactly the disks of casting
     /// every block, on random cameras, masks, obstacle heights, planes and boxes, near the
-    /// origin and a thousand kilometres from it.
+    /// origin and a thousand kilometres from it; and skipping what a caller does not want loses
+    /// none it does.
     #[test]
     fn skipping_tiles_loses_no_disk() {
         use nalgebra::{Isometry3, Translation3, UnitQuaternion};
         use rand::{Rng, SeedableRng, rngs::SmallRng};
         let mut rng = SmallRng::seed_from_u64(7);
-        let (mut skipped, mut disks) = (0usize, 0usize);
+        let (mut skipped, mut disks, mut left_out) = (0usize, 0usize, 0usize);
         for case in 0..400 {
             let far = if case % 2 == 0 { 0.0 } else { 1e6 };
             let mut camera = nadir_camera_at(rng.random_range(5.0..60.0));
@@ -535,20 +554,58 @@ mod tests {
                 let bounds = [x, y, x + dx, y + dy];
                 let mut all = Vec::new();
                 let plane = rays.plane(point, normal.into(), bounds);
-                rays.cast_rays(0..rays.len(), &plane, |_| true, &mut all);
+                rays.cast_rays(0..rays.len(), &plane, |_| true, &|_| true, &mut all);
                 assert_eq!(
                     rays.on_plane(point, normal.into(), bounds),
                     all,
                     "case {case}"
                 );
-                skipped += rays.tiles.iter().filter(|t| !t.may_reach(&plane)).count();
+                // Wanted only where they meet a box: every disk whose own box meets it is still
+                // there, in order, and nothing that casting every block does not give.
+                let (x, y) = (
+                    x + rng.random_range(-10.0..10.0),
+                    y + rng.random_range(-10.0..10.0),
+                );
+                let near = [
+                    x,
+                    y,
+                    x + rng.random_range(0.0..8.0),
+                    y + rng.random_range(0.0..8.0),
+                ];
+                let meets = |b: &[f64; 4]| {
+                    b[0] <= near[2] && near[0] <= b[2] && b[1] <= near[3] && near[1] <= b[3]
+                };
+                let disk_meets =
+                    |(c, r): &&([f64; 2], f64)| meets(&[c[0] - r, c[1] - r, c[0] + r, c[1] + r]);
+                let wanted = ObstacleRays::newest_view_on_plane(
+                    &[&rays],
+                    point,
+                    normal.into(),
+                    bounds,
+                    &meets,
+                );
+                let mut rest = all.iter();
+                assert!(
+                    wanted.iter().all(|d| rest.any(|a| a == d)),
+                    "case {case}: not cast"
+                );
+                assert_eq!(
+                    wanted.iter().filter(disk_meets).collect::<Vec<_>>(),
+                    all.iter().filter(disk_meets).collect::<Vec<_>>(),
+                    "case {case}"
+                );
+                left_out += all.len() - wanted.len();
+                skipped += (rays.tiles.iter())
+                    .filter(|t| !t.may_reach(&plane, &|_| true))
+                    .count();
                 disks += all.len();
             }
         }
-        // The test must exercise both sides: tiles skipped, and disks that reach.
+        // The test must exercise both sides: tiles skipped, and disks that reach; disks left
+        // out where not wanted.
         assert!(
-            skipped > 1000 && disks > 1000,
-            "{skipped} tiles skipped, {disks} disks"
+            skipped > 1000 && disks > 1000 && left_out > 1000,
+            "{skipped} tiles skipped, {disks} disks, {left_out} not wanted"
         );
     }
 
@@ -560,7 +617,7 @@ mod tests {
             [-100.0, -100.0, 100.0, 100.0],
         );
         let cast = |frames: &[&ObstacleRays]| {
-            ObstacleRays::newest_view_on_plane(frames, roof.0, roof.1, roof.2)
+            ObstacleRays::newest_view_on_plane(frames, roof.0, roof.1, roof.2, &|_| true)
         };
         // From 20 m, one obstacle block; it lands near (1.65, 2.85) on the roof.
         let mut data = vec![4u8; 100 * 80];

@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use landing_fusion::{Correction, FusionMap, NotRegistered};
-use landing_geometry::{CloudKind, Disk, KeepClear, Params, Triangulation};
+use landing_geometry::{CloudKind, Disk, KeepClear, KeepOut, Params, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
@@ -497,6 +497,29 @@ fn locate(
     })
 }
 
+/// Several frames' obstacle rays, oldest first, as the geometry's keep-out disks: on each
+/// plane, [`ObstacleRays::newest_view_on_plane`] (where a newer camera sees, its view decides).
+struct NewestViews<'a>(&'a [&'a ObstacleRays]);
+
+impl KeepOut for NewestViews<'_> {
+    fn disks_on_plane(&self, point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]) -> Vec<Disk> {
+        self.wanted_disks_on_plane(point, normal, bounds, &|_| true)
+    }
+
+    fn wanted_disks_on_plane(
+        &self,
+        point: [f64; 3],
+        normal: [f64; 3],
+        bounds: [f64; 4],
+        wanted: &dyn Fn(&[f64; 4]) -> bool,
+    ) -> Vec<Disk> {
+        ObstacleRays::newest_view_on_plane(self.0, point, normal, bounds, wanted)
+            .into_iter()
+            .map(|(center, radius)| Disk { center, radius })
+            .collect()
+    }
+}
+
 /// Runs the geometry on `input`: the detection, and the time of the triangulation when it was
 /// made beforehand.
 fn detect(input: Located<'_>) -> Result<(landing_geometry::Detection, Option<Duration>), Error> {
@@ -511,14 +534,7 @@ fn detect(input: Located<'_>) -> Result<(landing_geometry::Detection, Option<Dur
         triangulated,
     } = input;
     let (given, triangulation) = triangulated.unzip();
-    // A fused stream keeps several frames' rays, oldest first: where a newer camera sees, its
-    // view decides.
-    let disks = |point: [f64; 3], normal: [f64; 3], bounds: [f64; 4]| {
-        ObstacleRays::newest_view_on_plane(keep_out, point, normal, bounds)
-            .into_iter()
-            .map(|(center, radius)| Disk { center, radius })
-            .collect()
-    };
+    let disks = NewestViews(keep_out);
     let mut cloud = landing_geometry::Cloud::new(points, classes).with_kind(kind);
     // With a class mask, safe circles also keep clear of the obstacle pixels: the camera sees
     // what fell between the LiDAR's scan lines. (A fused map always has a triangulation given.)
