@@ -457,8 +457,8 @@ impl Cell {
     }
 }
 
-/// Surfaces of at least this many points have their cells' classes looked up on two threads
-/// ([`FusionMap::classes_of`]).
+/// Lists of at least this many cells have their classes looked up on two threads
+/// ([`decide_cells`]).
 const PARALLEL_LOOKUPS: usize = 8192;
 
 /// Cells whose mean weighs at most this many points, so that the mean keeps following new
@@ -629,43 +629,39 @@ impl<K> FusionMap<K> {
         is_landable: impl Fn(u8) -> bool,
     ) -> (Option<Vec<u8>>, Vec<bool>) {
         let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
-        let weight = self.params.obstacle_weight;
-        let resolving = self.params.max_pixel_footprint_m > 0.0;
-        let cells = &self.cells;
-        let of = |keys: &[[i32; 3]]| -> (Vec<u8>, Vec<bool>) {
-            (keys.iter())
-                .map(|key| {
-                    let Some(cell) = cells.get(key) else {
-                        return (0, false);
-                    };
-                    let class = decide(&cell.votes, &landable, weight);
-                    (
-                        class,
-                        resolving && !cell.resolved && landable[usize::from(class)],
-                    )
-                })
-                .unzip()
-        };
-        // A large surface's cells are looked up in two halves at once: a lookup is mostly a
-        // wait on memory, and this runs between the frame's classes and the answer.
-        let (mut classes, mut unresolved);
-        if surface.keys.len() < PARALLEL_LOOKUPS {
-            (classes, unresolved) = of(&surface.keys);
-        } else {
-            let (first, second) = surface.keys.split_at(surface.keys.len() / 2);
-            let (rest, rest_unresolved);
-            ((classes, unresolved), (rest, rest_unresolved)) = std::thread::scope(|threads| {
-                let half = threads.spawn(|| of(second));
-                let mine = of(first);
-                (
-                    mine,
-                    half.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
-                )
-            });
-            classes.extend(rest);
-            unresolved.extend(rest_unresolved);
-        }
+        let (classes, unresolved) =
+            decide_cells(&self.cells, &self.params, &landable, &surface.keys);
         (self.classified.then_some(classes), unresolved)
+    }
+
+    /// [`FusionMap::classes_of`] the surface [`FusionMap::meshed_surface`] last gave, kept
+    /// between scans: decided again only for the columns whose top cell the scans since took
+    /// votes on, were resolved or changed. (Debug builds check the answer against
+    /// `classes_of`.)
+    pub fn meshed_classes(
+        &mut self,
+        is_landable: impl Fn(u8) -> bool,
+    ) -> (Option<Vec<u8>>, Vec<bool>) {
+        let landable: [bool; CLASSES] = std::array::from_fn(|i| is_landable(i as u8));
+        let (cells, params) = (&self.cells, &self.params);
+        let (classes, unresolved) = self.columns.classes(landable, |keys| {
+            decide_cells(cells, params, &landable, keys)
+        });
+        let kept = (
+            self.classified.then(|| classes.to_vec()),
+            unresolved.to_vec(),
+        );
+        #[cfg(debug_assertions)]
+        {
+            let keys = self.columns.top_keys();
+            let fresh = decide_cells(&self.cells, &self.params, &landable, keys);
+            assert_eq!(
+                (kept.0.as_deref().unwrap_or(&fresh.0), &kept.1),
+                (&fresh.0[..], &fresh.1),
+                "kept and fresh classes"
+            );
+        }
+        kept
     }
 
     /// The kept keep-out footprints, oldest first.
@@ -847,6 +843,9 @@ impl<K> FusionMap<K> {
         for (key, cell) in self.cells.iter_mut().filter(|(_, cell)| !cell.resolved) {
             let p = cell.position(key, origin, c);
             cell.resolved = (view.0)(&p).is_some_and(|f| f <= max);
+            if cell.resolved {
+                self.columns.resolved(*key);
+            }
         }
     }
 
@@ -939,6 +938,48 @@ fn sort_key(key: &[i32; 3]) -> u128 {
 /// The key [`sort_key`] packed.
 fn unsort_key(packed: u128) -> [i32; 3] {
     std::array::from_fn(|i| ((packed >> (64 - 32 * i)) as u32 ^ 0x8000_0000) as i32)
+}
+
+/// The class each of the cells `keys` decides ([`decide`]) and whether it is landable ground
+/// not yet seen finely; a cell not held reads as unknown. A long list is looked up in two
+/// halves at once: a lookup is mostly a wait on memory.
+fn decide_cells(
+    cells: &HashMap<[i32; 3], Cell, BuildHasherDefault<CellHasher>>,
+    params: &FusionParams,
+    landable: &[bool; CLASSES],
+    keys: &[[i32; 3]],
+) -> (Vec<u8>, Vec<bool>) {
+    let weight = params.obstacle_weight;
+    let resolving = params.max_pixel_footprint_m > 0.0;
+    let of = |keys: &[[i32; 3]]| -> (Vec<u8>, Vec<bool>) {
+        (keys.iter())
+            .map(|key| {
+                let Some(cell) = cells.get(key) else {
+                    return (0, false);
+                };
+                let class = decide(&cell.votes, landable, weight);
+                (
+                    class,
+                    resolving && !cell.resolved && landable[usize::from(class)],
+                )
+            })
+            .unzip()
+    };
+    if keys.len() < PARALLEL_LOOKUPS {
+        return of(keys);
+    }
+    let (first, second) = keys.split_at(keys.len() / 2);
+    let ((mut classes, mut unresolved), (rest, rest_unresolved)) = std::thread::scope(|threads| {
+        let half = threads.spawn(|| of(second));
+        let mine = of(first);
+        (
+            mine,
+            half.join().unwrap_or_else(|p| std::panic::resume_unwind(p)),
+        )
+    });
+    classes.extend(rest);
+    unresolved.extend(rest_unresolved);
+    (classes, unresolved)
 }
 
 /// The class a cell's votes decide (see [`FusionMap::fused`]).

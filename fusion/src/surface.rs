@@ -8,7 +8,9 @@
 //! [`KeptTriangulation`], repaired where those points moved or appeared instead of made again
 //! from every point. When cells are forgotten (the horizon, the cell bound) or the map starts
 //! over, the columns are read again from all the cells, in key order, and triangulated from
-//! scratch.
+//! scratch. The class each column's top cell decides is kept the same way: decided again only
+//! for the columns whose top cell a scan voted on, resolved or replaced
+//! ([`crate::FusionMap::meshed_classes`]).
 
 use std::collections::HashMap;
 use std::hash::BuildHasherDefault;
@@ -16,7 +18,7 @@ use std::hash::BuildHasherDefault;
 use landing_geometry::delaunay::KeptTriangulation;
 use landing_geometry::{GeometryError, Triangulation};
 
-use crate::{CellHasher, Surface};
+use crate::{CLASSES, CellHasher, Surface};
 
 /// The map's top surface in the map's own coordinates, with its Delaunay triangulation.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,6 +52,15 @@ pub(crate) struct Columns {
     /// Cells were forgotten: the columns are to be read again from all the cells.
     stale: bool,
     mesh: KeptTriangulation,
+    /// Per place, the class its top cell decides and whether it is landable ground not yet
+    /// seen finely, for the landable classes `decided_for`.
+    class: Vec<u8>,
+    unresolved: Vec<bool>,
+    /// Places whose top cell took points (and so votes), was resolved or is another cell since
+    /// the classes were last decided.
+    redecide: Vec<u32>,
+    /// The landable classes `class` was decided for; `None`: to be decided for every place.
+    decided_for: Option<[bool; CLASSES]>,
 }
 
 impl Columns {
@@ -73,6 +84,9 @@ impl Columns {
                 if key[2] >= top[2] {
                     *top = key;
                     self.changed.push(at);
+                    if self.decided_for.is_some() {
+                        self.redecide.push(at);
+                    }
                 }
             }
             None => {
@@ -82,8 +96,55 @@ impl Columns {
                 self.world.push([0.0; 3]);
                 self.local.push([0.0; 3]);
                 self.changed.push(at);
+                if self.decided_for.is_some() {
+                    self.redecide.push(at);
+                }
             }
         }
+    }
+
+    /// The cell `key` was resolved: its column's class is decided again if it is the column's
+    /// top. (Votes need no call: a scan votes only in the cells it placed points in, which
+    /// [`Columns::touch`] named.)
+    pub(crate) fn resolved(&mut self, key: [i32; 3]) {
+        if self.stale || self.decided_for.is_none() {
+            return;
+        }
+        if let Some(&at) = self.place.get(&[key[0], key[1]])
+            && self.top[at as usize] == key
+        {
+            self.redecide.push(at);
+        }
+    }
+
+    /// The class and unresolved flag of every column's top cell, for the `landable` classes:
+    /// `decide` gives them for a list of cells. Only the columns [`Columns::touch`] and
+    /// [`Columns::resolved`] named since the last call are decided again, unless the landable
+    /// classes differ or there is nothing kept yet.
+    pub(crate) fn classes(
+        &mut self,
+        landable: [bool; CLASSES],
+        decide: impl Fn(&[[i32; 3]]) -> (Vec<u8>, Vec<bool>),
+    ) -> (&[u8], &[bool]) {
+        if self.decided_for == Some(landable) && self.class.len() <= self.top.len() {
+            self.redecide.sort_unstable();
+            self.redecide.dedup();
+            self.class.resize(self.top.len(), 0);
+            self.unresolved.resize(self.top.len(), false);
+            let keys: Vec<[i32; 3]> = (self.redecide.iter())
+                .map(|&at| self.top[at as usize])
+                .collect();
+            let (class, unresolved) = decide(&keys);
+            for ((&at, c), u) in self.redecide.iter().zip(class).zip(unresolved) {
+                self.class[at as usize] = c;
+                self.unresolved[at as usize] = u;
+            }
+        } else {
+            (self.class, self.unresolved) = decide(&self.top);
+            self.decided_for = Some(landable);
+        }
+        self.redecide.clear();
+        (&self.class, &self.unresolved)
     }
 
     /// Cells were forgotten (or all of them): read the columns again when next meshed.
@@ -94,6 +155,15 @@ impl Columns {
         self.world.clear();
         self.local.clear();
         self.changed.clear();
+        self.forget_classes();
+    }
+
+    /// The kept classes are to be decided again for every place.
+    fn forget_classes(&mut self) {
+        self.class.clear();
+        self.unresolved.clear();
+        self.redecide.clear();
+        self.decided_for = None;
     }
 
     /// The surface and its triangulation now: `all` gives the whole surface in key order (when
@@ -119,6 +189,7 @@ impl Columns {
             self.top = surface.keys;
             self.world = surface.points;
             self.changed.clear();
+            self.forget_classes();
             self.stale = false;
             self.mesh.rebuild(&self.local)
         } else {
@@ -143,6 +214,12 @@ impl Columns {
         }
     }
 
+    /// Each column's top cell, in the kept order.
+    #[cfg(debug_assertions)]
+    pub(crate) fn top_keys(&self) -> &[[i32; 3]] {
+        &self.top
+    }
+
     /// What the kept triangulation has done so far.
     pub(crate) fn mesh_stats(&self) -> landing_geometry::delaunay::KeptStats {
         self.mesh.stats()
@@ -156,5 +233,8 @@ impl Columns {
             + self.local.capacity() * std::mem::size_of::<[f32; 3]>()
             + self.changed.capacity() * 4
             + self.mesh.bytes()
+            + self.class.capacity()
+            + self.unresolved.capacity()
+            + self.redecide.capacity() * 4
     }
 }

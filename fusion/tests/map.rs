@@ -547,8 +547,15 @@ fn check_meshed(m: &mut FusionMap<u32>, what: &str) -> Result<(), TestCaseError>
     }
     let fresh = landing_geometry::triangulate_points(&meshed.points).unwrap();
     prop_assert_eq!(tri.len(), fresh.len(), "{}: triangles", what);
-    // The same classes as the surface's, point for point.
+    // The same classes as the surface's, point for point; and the kept ones the same, in order.
     let (classes, unresolved) = m.classes_of(&meshed.surface, landable);
+    let kept = m.meshed_classes(landable);
+    prop_assert_eq!(
+        (&kept.0, &kept.1),
+        (&classes, &unresolved),
+        "{}: kept classes",
+        what
+    );
     let want = m.fused(everything, landable);
     let by_point = |pts: &[[f64; 3]], c: &Option<Vec<u8>>, u: &[bool]| {
         let mut v: Vec<([u64; 3], u8, bool)> = pts
@@ -569,9 +576,10 @@ fn check_meshed(m: &mut FusionMap<u32>, what: &str) -> Result<(), TestCaseError>
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(48))]
 
-    /// The surface kept between scans is the surface read afresh, and its kept triangulation a
-    /// Delaunay triangulation of its points with the fresh one's triangle count, after every
-    /// scan of random approaches: the same roof scanned again and again (means moving, new
+    /// The surface kept between scans is the surface read afresh, its kept triangulation a
+    /// Delaunay triangulation of its points with the fresh one's triangle count, and its kept
+    /// classes the ones read afresh, after every scan of random approaches (classes and views
+    /// that change): the same roof scanned again and again (means moving, new
     /// columns at its edges, new tops on it), resets, time gaps past the horizon and a small
     /// cell bound that forgets cells.
     #[test]
@@ -603,8 +611,19 @@ proptest! {
                     [x, y, z]
                 })
                 .collect();
-            let classes = vec![ROOFTOP; pts.len()];
-            m.insert(Scan { reset: *event == 19, ..scan(t, &pts, &classes) });
+            // Votes that change cells' classes now and then, and views that resolve part of the
+            // roof, finer or coarser than the rule.
+            let classes: Vec<u8> = (0..n)
+                .map(|_| if g.next_u32().is_multiple_of(5) { AC_UNIT } else { ROOFTOP })
+                .collect();
+            let max = FusionParams::default().max_pixel_footprint_m;
+            let (edge, fine) = (g.range(-6.0, 6.0), *event % 2 == 0);
+            let view = move |p: &[f64; 3]| (p[0] < edge).then_some(if fine { max } else { 2.0 * max });
+            m.insert(Scan {
+                reset: *event == 19,
+                view: (*event % 4 != 3).then_some(View(&view)),
+                ..scan(t, &pts, &classes)
+            });
             check_meshed(&mut m, &format!("scan {k}"))?;
         }
     }

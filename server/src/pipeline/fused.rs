@@ -11,7 +11,7 @@
 
 use std::time::{Duration, Instant};
 
-use landing_fusion::{Correction, MeshedSurface, NotRegistered, Placed, Scan, Surface, View};
+use landing_fusion::{Correction, MeshedSurface, NotRegistered, Placed, Scan, View};
 use landing_geometry::{CloudKind, Triangulation};
 use landing_perception::ObstacleRays;
 use nalgebra::{Isometry3, Point3};
@@ -80,7 +80,6 @@ struct Registered {
 /// The map's top surface with the frame's points placed in it.
 struct Surfaced {
     placed: Placed,
-    surface: Surface,
     /// The surface's points in frame-local coordinates.
     local: Vec<[f32; 3]>,
     triangulated: Result<Triangulation, landing_geometry::GeometryError>,
@@ -219,7 +218,6 @@ impl FusedFrame<'_> {
         });
         let Surfaced {
             placed,
-            surface,
             local,
             triangulated,
             placing,
@@ -235,7 +233,7 @@ impl FusedFrame<'_> {
             },
         );
         let landable = &self.options.params.landable_classes;
-        let (classes, unresolved) = map.classes_of(&surface, |class| landable.contains(&class));
+        let (classes, unresolved) = map.meshed_classes(|class| landable.contains(&class));
         let fusion = registered.time + placing + map_start.elapsed();
         classified.timings.fusion = Some(fusion);
         Voted {
@@ -327,7 +325,6 @@ fn place(map: &mut StreamMap, scan: &Scan<'_, ObstacleRays>, origin: [f64; 3]) -
     }
     Surfaced {
         placed,
-        surface,
         local,
         triangulated,
         placing,
