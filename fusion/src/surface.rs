@@ -126,7 +126,7 @@ impl Columns {
         landable: [bool; CLASSES],
         decide: impl Fn(&[[i32; 3]]) -> (Vec<u8>, Vec<bool>),
     ) -> (&[u8], &[bool]) {
-        if self.decided_for == Some(landable) && self.class.len() <= self.top.len() {
+        if self.decided_for == Some(landable) {
             self.redecide.sort_unstable();
             self.redecide.dedup();
             self.class.resize(self.top.len(), 0);

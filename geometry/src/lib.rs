@@ -237,23 +237,28 @@ impl Polygon {
 
     /// The shell's bounding box `[min x, min y, max x, max y]` (zeros when empty).
     pub fn bounds(&self) -> [f64; 4] {
-        let Some(&[x, y]) = self.shell.first() else {
-            return [0.0; 4];
-        };
-        self.shell.iter().fold([x, y, x, y], |b, p| {
-            [
-                b[0].min(p[0]),
-                b[1].min(p[1]),
-                b[2].max(p[0]),
-                b[3].max(p[1]),
-            ]
-        })
+        ring_bounds(&self.shell)
     }
 
     /// Signed distance from `p` to the polygon's boundary: positive inside, negative outside.
     pub fn signed_distance(&self, p: [f64; 2]) -> f64 {
         polylabel::signed_distance(self, p)
     }
+}
+
+/// A ring's bounding box `[min x, min y, max x, max y]` (zeros when empty).
+pub(crate) fn ring_bounds(ring: &[[f64; 2]]) -> [f64; 4] {
+    let Some(&[x, y]) = ring.first() else {
+        return [0.0; 4];
+    };
+    ring.iter().fold([x, y, x, y], |b, p| {
+        [
+            b[0].min(p[0]),
+            b[1].min(p[1]),
+            b[2].max(p[0]),
+            b[3].max(p[1]),
+        ]
+    })
 }
 
 /// One ranked landing site.

@@ -8,7 +8,7 @@
 use crate::bins::Bins;
 use crate::boundary::{lex, ring_is_ccw};
 use crate::triangulation::coord;
-use crate::{Detection, GeometryError, Polygon};
+use crate::{Detection, GeometryError, Polygon, ring_bounds};
 
 /// Shoelace signed area of a ring (not closed): positive when counter-clockwise.
 pub fn ring_signed_area(ring: &[[f64; 2]]) -> f64 {
@@ -117,7 +117,7 @@ pub fn check_polygon(polygon: &Polygon) -> Result<(), GeometryError> {
         }
     }
     check_segments(&rings)?;
-    let boxes: Vec<[f64; 4]> = polygon.holes.iter().map(|h| ring_box(h)).collect();
+    let boxes: Vec<[f64; 4]> = polygon.holes.iter().map(|h| ring_bounds(h)).collect();
     for (h, hole) in polygon.holes.iter().enumerate() {
         if sample_location(hole, &polygon.shell) != Location::Inside {
             return bad(format!("hole {h} is not inside the shell"));
@@ -180,26 +180,6 @@ pub fn check_detection(detection: &Detection) -> Result<(), GeometryError> {
         }
     }
     Ok(())
-}
-
-/// A ring's box: min x, min y, max x, max y.
-fn ring_box(ring: &[[f64; 2]]) -> [f64; 4] {
-    ring.iter().fold(
-        [
-            f64::INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NEG_INFINITY,
-        ],
-        |b, p| {
-            [
-                b[0].min(p[0]),
-                b[1].min(p[1]),
-                b[2].max(p[0]),
-                b[3].max(p[1]),
-            ]
-        },
-    )
 }
 
 fn ring_name(r: usize) -> String {

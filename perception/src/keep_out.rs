@@ -375,8 +375,10 @@ impl ObstacleRays {
             }
             // Rounding: a disk's centre may land a hair outside the sweep's box.
             let slack = radius * (1.0 + 1e-9) + 1e-6 * (1.0 + hit.x.abs() + hit.y.abs());
-            let reach = [lo.x - slack, lo.y - slack, hi.x + slack, hi.y + slack];
-            if reach.iter().all(|v| v.is_finite()) && !wanted(&reach) {
+            if !is_wanted(
+                [lo.x - slack, lo.y - slack, hi.x + slack, hi.y + slack],
+                wanted,
+            ) {
                 continue;
             }
             if !keep(&under) {
@@ -462,8 +464,14 @@ impl Tile {
             && reach[3] >= bounds[1]
             && reach[0] <= bounds[2]
             && reach[1] <= bounds[3]
-            && (!reach.iter().all(|v| v.is_finite()) || wanted(&reach))
+            && is_wanted(reach, wanted)
     }
+}
+
+/// Whether the disks lying in `reach` (`[min x, min y, max x, max y]`) are to be cast: a box
+/// with a non-finite side always is, else as `wanted` says.
+fn is_wanted(reach: [f64; 4], wanted: &dyn Fn(&[f64; 4]) -> bool) -> bool {
+    !reach.iter().all(|v| v.is_finite()) || wanted(&reach)
 }
 
 #[cfg(test)]
