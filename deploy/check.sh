@@ -101,7 +101,7 @@ tools() {
     if [ ! -x "$py" ]; then
       python3 -m venv "$venv" || return 1
     fi
-    "$py" -m pip install --quiet --disable-pip-version-check -r deploy/requirements.txt || return 1
+    "$py" -m pip install --quiet --disable-pip-version-check --no-cache-dir -r deploy/requirements.txt || return 1
   fi
   "$venv/bin/hadolint" --version
   "$venv/bin/shellcheck" --version | sed -n 2p

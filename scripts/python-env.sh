@@ -44,8 +44,9 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "python-env: installing $* into .venvs/$name" >&2
   args=()
   for r in "$@"; do args+=(-r "$r"); done
-  "$py" -m pip install --quiet --disable-pip-version-check --upgrade pip >&2
-  "$py" -m pip install --quiet --disable-pip-version-check "${args[@]}" >&2
+  # No wheel cache: the venv is what is kept, and PyTorch's wheels would take gigabytes twice.
+  "$py" -m pip install --quiet --disable-pip-version-check --no-cache-dir --upgrade pip >&2
+  "$py" -m pip install --quiet --disable-pip-version-check --no-cache-dir "${args[@]}" >&2
   echo "$want" > "$stamp"
 fi
 echo "$py"

@@ -15,7 +15,8 @@ cd "$root"
 bash scripts/setup.sh
 export ORT_DYLIB_PATH="$root/.ort/libonnxruntime.so"
 
-step() { printf '\n=== %s\n' "$*"; }
+# Each step's header says how much disk is left: the suite's builds and venvs take about 15 GB.
+step() { printf '\n=== %s  (%s free)\n' "$*" "$(df -h --output=avail . | tail -1 | tr -d ' ')"; }
 
 step "format and lints"
 cargo fmt --all -- --check
