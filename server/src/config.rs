@@ -386,7 +386,9 @@ pub struct SegmentationConfig {
     /// "cpu" or "cuda" (falls back to CPU with a warning).
     pub execution_provider: ExecutionProvider,
     pub intra_threads: u32,
-    /// Parallel ONNX Runtime sessions.
+    /// ONNX Runtime sessions, used in turn: this many frames are segmented at once, and a
+    /// frame judged alone runs its input sizes at once on as many of them (default 2: the two
+    /// default sizes side by side).
     pub sessions: u32,
     /// "" = `ORT_DYLIB_PATH`, else `.ort/libonnxruntime.so`.
     pub ort_library: PathBuf,
@@ -453,7 +455,7 @@ impl Default for SegmentationConfig {
             model_path: "models/rooftop-segmentation.onnx".into(),
             execution_provider: ExecutionProvider::Cpu,
             intra_threads: 1,
-            sessions: 1,
+            sessions: 2,
             ort_library: PathBuf::new(),
             input_sizes: vec![InputSize::new(320, 240), InputSize::new(256, 192)],
             ort_log_level: OrtLogLevel::default(),

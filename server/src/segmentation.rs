@@ -47,7 +47,7 @@ impl PointView {
 }
 
 /// A loaded segmentation model with `sessions` ONNX Runtime sessions used in turn, so that
-/// several frames can be segmented at once.
+/// several frames, and a frame's input sizes, can be segmented at once.
 #[derive(Debug)]
 pub struct Segmenter {
     sessions: Vec<landing_perception::Segmenter>,
@@ -145,15 +145,37 @@ impl Segmenter {
         landable: &[u8],
     ) -> Result<Masks, Error> {
         let t0 = Instant::now();
-        let session =
-            &self.sessions[self.next.fetch_add(1, Ordering::Relaxed) % self.sessions.len()];
         let sizes = match judged {
             Judged::Alone => &self.sizes[..],
             Judged::InStream => &self.sizes[..1],
         };
-        let mut masks = sizes
-            .iter()
-            .map(|&(w, h)| session.segment_at(image, w, h))
+        // The sizes take the next sessions in turn; where they have a session each, the others
+        // run on threads of their own beside the first, so a frame judged alone waits for its
+        // slowest size, not for the sum of them.
+        let first = self.next.fetch_add(sizes.len(), Ordering::Relaxed);
+        let run = |i: usize| {
+            let (w, h) = sizes[i];
+            self.sessions[(first + i) % self.sessions.len()].segment_at(image, w, h)
+        };
+        let masks: Vec<Result<ClassMask, PerceptionError>> = if self.sessions.len() > 1 {
+            std::thread::scope(|threads| {
+                let others: Vec<_> = (1..sizes.len())
+                    .map(|i| threads.spawn(move || run(i)))
+                    .collect();
+                let mut masks = vec![run(0)];
+                for other in others {
+                    let mask = other.join().map_err(|_| {
+                        Error::Internal("segmenting at a second input size panicked".into())
+                    })?;
+                    masks.push(mask);
+                }
+                Ok::<_, Error>(masks)
+            })?
+        } else {
+            (0..sizes.len()).map(run).collect()
+        };
+        let mut masks = masks
+            .into_iter()
             .collect::<Result<Vec<_>, PerceptionError>>()
             .map_err(|e| model_error(&e))?;
         let fused = ClassMask::fuse_keeping_obstacles(&masks, obstacle_test(landable))
@@ -440,5 +462,40 @@ mod tests {
         // In a stream, the blocks around the point cast nothing; the first block, out of its
         // 3 × 3 mask cells, still does.
         assert_eq!(blocks(Judged::InStream), 1);
+    }
+
+    /// With a session per input size the sizes run at once, on threads of their own; the masks
+    /// are those of one session running them in turn, and concurrent frames share the sessions.
+    #[test]
+    fn a_frame_segmented_on_two_sessions_at_once_gets_the_masks_of_one() {
+        let root = landing_perception::workspace_root();
+        let png = std::fs::read(root.join("perception/tests/data/images/000001.png")).unwrap();
+        let image = decode_image(ImageData::Png(&png)).unwrap();
+        let landable = [SemanticClass::BuildingRooftop as u8];
+        let load = |sessions| {
+            Segmenter::load(&SegmentationConfig {
+                model_path: root.join("models/rooftop-segmentation.onnx"),
+                sessions,
+                ..SegmentationConfig::default()
+            })
+            .unwrap()
+        };
+        let (one, two) = (load(1), load(2));
+        for judged in [Judged::Alone, Judged::InStream] {
+            let want = one.segment(&image, judged, &landable).unwrap();
+            let got: Vec<Masks> = std::thread::scope(|threads| {
+                let frames: Vec<_> = (0..3)
+                    .map(|_| threads.spawn(|| two.segment(&image, judged, &landable).unwrap()))
+                    .collect();
+                frames.into_iter().map(|f| f.join().unwrap()).collect()
+            });
+            for masks in got {
+                assert_eq!(masks.finest, want.finest, "{judged:?}");
+                assert_eq!(masks.fused, want.fused, "{judged:?}");
+            }
+        }
+        // The two sizes disagree somewhere, so the fused mask is not the finest one alone.
+        let alone = one.segment(&image, Judged::Alone, &landable).unwrap();
+        assert_ne!(alone.fused, alone.finest);
     }
 }
