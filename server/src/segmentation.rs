@@ -149,9 +149,9 @@ impl Segmenter {
             Judged::Alone => &self.sizes[..],
             Judged::InStream => &self.sizes[..1],
         };
-        // The sizes take the next sessions in turn; where they have a session each, the others
-        // run on threads of their own beside the first, so a frame judged alone waits for its
-        // slowest size, not for the sum of them.
+        // The sizes take the next sessions in turn, and with more than one session every size
+        // but the first runs on a thread of its own beside it (sizes sharing a session take
+        // turns on it): a frame judged alone waits for its slowest size, not for their sum.
         let first = self.next.fetch_add(sizes.len(), Ordering::Relaxed);
         let run = |i: usize| {
             let (w, h) = sizes[i];
