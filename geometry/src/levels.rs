@@ -13,16 +13,16 @@
 //!   storey's floor: tens of square metres or more, which the area bound keeps.
 //! - **A street called roof** ([`is_street_level`]): a region within [`STREET_LEVEL_M`] of the
 //!   lowest level of the scan within [`STREET_RADIUS_M`] (its [`LOW_QUANTILE`]), where points
-//!   classed ground lie, while a region at least as large stands [`MIN_ROOF_ABOVE_GROUND_M`]
-//!   or more above that level. The level is the scan's, not that of the points classed ground:
-//!   a model that calls part of a roof ground would otherwise put the street on the roof; and a
-//!   roof the scan shows alone, with points the model calls ground on it, is kept unless a
-//!   larger region stands above it.
+//!   classed ground lie, and either a region at least as large stands [`MIN_ROOF_ABOVE_GROUND_M`]
+//!   or more above that level, or most of the classed points at that level are ground
+//!   ([`STREET_GROUND_SHARE`]: a patch of street called roof in the street around it). The
+//!   level is the scan's, not that of the points classed ground: a model that calls part of a
+//!   roof ground would otherwise put the street on the roof; and a roof the scan shows alone,
+//!   or beside a taller one, with points the model calls ground on it, is kept unless a larger
+//!   region stands above it or the model calls most of it ground.
 //!
 //! Both judge from heights, areas and classes alone, so they apply to a scan and to a fused map
 //! alike.
-
-use std::cmp::Ordering;
 
 use crate::regions::Regions;
 use crate::{Polygon, SemanticClass};
@@ -65,6 +65,12 @@ pub const MIN_GROUND_POINTS: usize = 10;
 /// over the lowest level, metres: a roof of one storey or more.
 pub const MIN_ROOF_ABOVE_GROUND_M: f64 = 2.5;
 
+/// A region at the lowest level is street when at least this share of the classed points at
+/// that level around it are ground: the street around a patch the model calls roof is mostly
+/// ground, a roof mostly roof (the shipped model calls 1 % of ground pixels roof and 3 % of
+/// roof pixels something else; a roof part called ground is kept below half).
+pub const STREET_GROUND_SHARE: f64 = 0.5;
+
 /// For each region (same order as `polygons`), whether it is no roof to land on: a raised
 /// platform on a larger roof, or (with classes) a street called roof.
 pub fn no_roof(
@@ -74,15 +80,21 @@ pub fn no_roof(
     classes: Option<&[u8]>,
 ) -> Vec<bool> {
     // Without classes no point is ground, so no region is street. With them, the ground points
-    // are gathered once, and only if a region is low enough to be street.
+    // near enough the lowest region's height to count are gathered once, when a region first
+    // asks.
+    let lowest = (regions.regions.iter()).fold(f64::INFINITY, |z, r| z.min(r.mean[2]));
     let ground = std::cell::OnceCell::new();
-    let ground = || {
-        let all =
-            ground.get_or_init(|| classes.map_or_else(Vec::new, |c| ground_points(points, c)));
-        all.as_slice()
-    };
     let mut drop: Vec<bool> = (0..regions.regions.len())
-        .map(|r| classes.is_some() && street_level(regions, polygons, r, points, ground))
+        .map(|r| {
+            classes.is_some_and(|c| {
+                let ground = || {
+                    ground
+                        .get_or_init(|| ground_points(points, c, lowest))
+                        .as_slice()
+                };
+                street_level(regions, polygons, r, points, c, ground)
+            })
+        })
         .collect();
     let platforms: Vec<bool> = (0..regions.regions.len())
         .map(|r| !drop[r] && is_raised_platform(regions, polygons, r, &drop))
@@ -126,56 +138,93 @@ fn outer(polygon: &Polygon) -> Polygon {
 }
 
 /// Whether region `r` lies within [`STREET_LEVEL_M`] of the lowest level of the scan around it
-/// (the [`LOW_QUANTILE`] of the heights within [`STREET_RADIUS_M`]), where points classed ground
-/// lie, and another region at least as large stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above
-/// that level.
+/// (the [`LOW_QUANTILE`] of the heights within [`STREET_RADIUS_M`]), where at least
+/// [`MIN_GROUND_POINTS`] points classed ground lie, and either another region at least as large
+/// stands at least [`MIN_ROOF_ABOVE_GROUND_M`] above that level or at least
+/// [`STREET_GROUND_SHARE`] of the classed points there are ground. `classes` are the points'.
 pub fn is_street_level(
     regions: &Regions,
     polygons: &[Polygon],
     r: usize,
     points: &[[f64; 3]],
-    ground: &[[f64; 3]],
+    classes: &[u8],
 ) -> bool {
-    street_level(regions, polygons, r, points, || ground)
+    let ground = ground_points(points, classes, regions.regions[r].mean[2]);
+    street_level(regions, polygons, r, points, classes, || &ground)
 }
 
-/// [`is_street_level`], with the ground points asked for only when the region's height and the
-/// other regions leave the answer to them.
+/// [`is_street_level`], with the points classed ground asked for once they are needed.
 fn street_level<'g>(
     regions: &Regions,
     polygons: &[Polygon],
     r: usize,
     points: &[[f64; 3]],
+    classes: &[u8],
     ground: impl FnOnce() -> &'g [[f64; 3]],
 ) -> bool {
+    may_be_street(regions.regions[r].mean, ground())
+        && street_by_level(regions, polygons, r, points, classes)
+}
+
+/// Whether enough points classed ground lie near a region at `mean` for it to be street. The
+/// level lies less than [`STREET_LEVEL_M`] below the region, so the ground points counted at
+/// it lie less than twice that below (three times leaves room for rounding). Most regions are
+/// roofs well above the street, with fewer such ground points than the count needs: they are
+/// known from the (few) points classed ground alone, without the level's two passes over every
+/// point.
+fn may_be_street([cx, cy, z]: [f64; 3], ground: &[[f64; 3]]) -> bool {
+    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
+    (ground.iter())
+        .filter(|p| (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2 && near_below(z, p[2]))
+        .nth(MIN_GROUND_POINTS - 1)
+        .is_some()
+}
+
+/// Whether height `h` lies less than three street levels below `z`, or above it: where the
+/// ground points a street at `z` would count lie ([`may_be_street`]).
+fn near_below(z: f64, h: f64) -> bool {
+    z - h < 3.0 * STREET_LEVEL_M
+}
+
+/// [`is_street_level`] from the scan's level around region `r` and the classes there.
+fn street_by_level(
+    regions: &Regions,
+    polygons: &[Polygon],
+    r: usize,
+    points: &[[f64; 3]],
+    classes: &[u8],
+) -> bool {
     let [cx, cy, z] = regions.regions[r].mean;
-    let area = polygons[r].area();
-    // A street has a region at least as large above it: `o.mean[2] - low >=
-    // MIN_ROOF_ABOVE_GROUND_M` and `z - low < STREET_LEVEL_M` need `o.mean[2] > z` (subtraction
-    // rounds monotonically), so without such a region the level is not needed (a roof's).
-    let higher_or_nan =
-        |h: f64| !matches!(h.partial_cmp(&z), Some(Ordering::Less | Ordering::Equal));
-    let higher = (regions.regions.iter().zip(polygons))
-        .any(|(o, p)| higher_or_nan(o.mean[2]) && p.area() >= area);
-    if !higher {
-        return false;
-    }
     let Some(low) = street_level_below(points, [cx, cy], z) else {
         return false;
     };
-    if !(regions.regions.iter().zip(polygons))
-        .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area)
-    {
+    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
+    let (mut on_ground, mut classed) = (0usize, 0usize);
+    for (p, &c) in points.iter().zip(classes) {
+        if c != 0
+            && (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2
+            && (p[2] - low).abs() < STREET_LEVEL_M
+        {
+            classed += 1;
+            on_ground += usize::from(c == SemanticClass::Ground as u8);
+        }
+    }
+    if on_ground < MIN_GROUND_POINTS {
         return false;
     }
-    let near2 = STREET_RADIUS_M * STREET_RADIUS_M;
-    let on_street = (ground().iter())
-        .filter(|p| {
-            (p[0] - cx).powi(2) + (p[1] - cy).powi(2) <= near2
-                && (p[2] - low).abs() < STREET_LEVEL_M
-        })
-        .count();
-    on_street >= MIN_GROUND_POINTS
+    let area = polygons[r].area();
+    let roof_above = (regions.regions.iter().zip(polygons))
+        .any(|(o, p)| o.mean[2] - low >= MIN_ROOF_ABOVE_GROUND_M && p.area() >= area);
+    roof_above || on_ground as f64 >= STREET_GROUND_SHARE * classed as f64
+}
+
+/// The points classed ground that a street at height `lowest` or above could count
+/// ([`near_below`]): in a scan whose roofs stand well above the street, none.
+fn ground_points(points: &[[f64; 3]], classes: &[u8], lowest: f64) -> Vec<[f64; 3]> {
+    (points.iter().zip(classes))
+        .filter(|(p, c)| **c == SemanticClass::Ground as u8 && near_below(lowest, p[2]))
+        .map(|(p, _)| *p)
+        .collect()
 }
 
 /// The lowest level of the points within [`STREET_RADIUS_M`] of `at`, the [`LOW_QUANTILE`] of
@@ -203,14 +252,6 @@ fn street_level_below(points: &[[f64; 3]], [cx, cy]: [f64; 2], z: f64) -> Option
     let mut heights: Vec<f64> = points.iter().filter(near).map(|p| p[2]).collect();
     let (_, &mut level, _) = heights.select_nth_unstable_by(k, f64::total_cmp);
     Some(level)
-}
-
-/// The points classed ground.
-fn ground_points(points: &[[f64; 3]], classes: &[u8]) -> Vec<[f64; 3]> {
-    (points.iter().zip(classes))
-        .filter(|(_, c)| **c == SemanticClass::Ground as u8)
-        .map(|(p, _)| *p)
-        .collect()
 }
 
 #[cfg(test)]
@@ -336,12 +377,84 @@ mod tests {
         assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 3.0).abs() < 0.1), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 20.0).abs() < 0.1), "{found:?}");
-        // With no roof above the street in the scan, the street's level says nothing.
+        // With no roof in the scan at all, the street around the patch, classed ground, still
+        // says what the patch is.
         let street: (Vec<[f32; 3]>, Vec<u8>) = (cloud.0.iter().zip(&cloud.1))
             .filter(|(p, _)| p[2] < 1.0)
             .map(|(p, c)| (*p, *c))
             .unzip();
-        assert!(sites(&street).iter().any(|s| s.0.abs() < 0.1));
+        assert!(sites(&street).is_empty(), "{:?}", sites(&street));
+    }
+
+    #[test]
+    fn a_street_called_roof_larger_than_the_roofs_beside_it_gives_no_site() {
+        // A 16 m × 12 m stretch of street called roof between two 6 m roofs 20 m up (fresh set
+        // 5798: no roof in the frame was as large as the street's patch), and the same street
+        // with nothing called roof on it but the patch.
+        let mut cloud = (Vec::new(), Vec::new());
+        let patch = |x: f64, y: f64| (12.0..=28.0).contains(&x) && (4.0..=16.0).contains(&y);
+        let roof_w = |x: f64, y: f64| (2.0..=8.0).contains(&x) && (7.0..=13.0).contains(&y);
+        let roof_e = |x: f64, y: f64| (32.0..=38.0).contains(&x) && (7.0..=13.0).contains(&y);
+        let taken = |x: f64, y: f64| {
+            patch(x, y)
+                || (1.5..=8.5).contains(&x) && (6.5..=13.5).contains(&y)
+                || (31.5..=38.5).contains(&x) && (6.5..=13.5).contains(&y)
+        };
+        grid([-10.0, -15.0, 50.0, 35.0], 0.0, GROUND, taken, &mut cloud);
+        grid(
+            [12.0, 4.0, 28.0, 16.0],
+            0.0,
+            ROOF,
+            |x, y| !patch(x, y),
+            &mut cloud,
+        );
+        grid(
+            [2.0, 7.0, 8.0, 13.0],
+            20.0,
+            ROOF,
+            |x, y| !roof_w(x, y),
+            &mut cloud,
+        );
+        grid(
+            [32.0, 7.0, 38.0, 13.0],
+            20.0,
+            ROOF,
+            |x, y| !roof_e(x, y),
+            &mut cloud,
+        );
+        let found = sites(&cloud);
+        assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
+        assert_eq!(
+            found.iter().filter(|s| (s.0 - 20.0).abs() < 0.1).count(),
+            2,
+            "{found:?}"
+        );
+    }
+
+    #[test]
+    fn a_roof_beside_a_taller_one_with_ground_on_it_stays() {
+        // A 20 m roof 10 m up, the lowest level of the scan (no street in it), a quarter of it
+        // called ground, beside a taller, smaller roof 14 m up (fresh fused set 5858, where a
+        // check that took any region over 25 m² above as the roof dropped the whole roof).
+        let mut cloud = (Vec::new(), Vec::new());
+        let band = |_: f64, y: f64| y > 15.0;
+        grid([0.0, 0.0, 20.0, 20.0], 10.0, ROOF, band, &mut cloud);
+        grid(
+            [0.0, 15.05, 20.0, 20.0],
+            10.0,
+            GROUND,
+            |x, y| !band(x, y),
+            &mut cloud,
+        );
+        grid(
+            [21.0, 0.0, 31.0, 20.0],
+            14.0,
+            ROOF,
+            |_, _| false,
+            &mut cloud,
+        );
+        let found = sites(&cloud);
+        assert!(found.iter().any(|s| (s.0 - 10.0).abs() < 0.1), "{found:?}");
     }
 
     #[test]
@@ -421,6 +534,40 @@ mod tests {
         }
     }
 
+    /// The shortcut from the ground points alone never says "no street" where the level and
+    /// the classes would say "street": seeded scans of streets, low and high roofs, every class
+    /// mixed in.
+    #[test]
+    fn the_ground_points_alone_rule_out_only_regions_that_are_no_street() {
+        let mut rng = crate::synthetic::Pcg32::new(5);
+        let mut streets = 0;
+        for _ in 0..60 {
+            let mut cloud = (Vec::new(), Vec::new());
+            for _ in 0..4 {
+                let (x, y) = (40.0 * rng.unit(), 40.0 * rng.unit());
+                let (w, d) = (4.0 + 10.0 * rng.unit(), 4.0 + 10.0 * rng.unit());
+                let z = [0.0, 0.0, 1.4, 2.9, 4.4, 20.0][(rng.next_u32() % 6) as usize];
+                let class = if rng.next_u32().is_multiple_of(3) {
+                    GROUND
+                } else {
+                    ROOF
+                };
+                grid([x, y, x + w, y + d], z, class, |_, _| false, &mut cloud);
+            }
+            let pts: Vec<[f64; 3]> = cloud.0.iter().map(|p| p.map(f64::from)).collect();
+            let (regions, polygons) = regions_of(&pts, &cloud.1);
+            let lowest = (regions.regions.iter()).fold(f64::INFINITY, |z, r| z.min(r.mean[2]));
+            let ground = ground_points(&pts, &cloud.1, lowest);
+            for r in 0..regions.regions.len() {
+                if street_by_level(&regions, &polygons, r, &pts, &cloud.1) {
+                    streets += 1;
+                    assert!(may_be_street(regions.regions[r].mean, &ground));
+                }
+            }
+        }
+        assert!(streets > 0);
+    }
+
     #[test]
     fn ground_far_below_the_lowest_level_is_no_street_at_it() {
         let mut cloud = (Vec::new(), Vec::new());
@@ -449,8 +596,7 @@ mod tests {
         let lower = (regions.regions.iter())
             .position(|r| (r.mean[2] - 10.0).abs() < 0.1)
             .expect("the lower roof's region");
-        let ground = ground_points(&pts, classes);
-        assert!(!is_street_level(&regions, &polygons, lower, &pts, &ground));
+        assert!(!is_street_level(&regions, &polygons, lower, &pts, classes));
         assert!(sites(&cloud).iter().any(|s| (s.0 - 10.0).abs() < 0.1));
     }
 
