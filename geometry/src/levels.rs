@@ -80,22 +80,15 @@ pub fn no_roof(
     classes: Option<&[u8]>,
 ) -> Vec<bool> {
     // Without classes no point is ground, so no region is street. With them, the ground points
-    // near enough the lowest region's height to count are gathered once, when a region first
-    // asks.
-    let lowest = (regions.regions.iter()).fold(f64::INFINITY, |z, r| z.min(r.mean[2]));
-    let ground = std::cell::OnceCell::new();
-    let mut drop: Vec<bool> = (0..regions.regions.len())
-        .map(|r| {
-            classes.is_some_and(|c| {
-                let ground = || {
-                    ground
-                        .get_or_init(|| ground_points(points, c, lowest))
-                        .as_slice()
-                };
-                street_level(regions, polygons, r, points, c, ground)
-            })
-        })
-        .collect();
+    // near enough the lowest region's height to count are gathered once, for every region.
+    let mut drop = vec![false; regions.regions.len()];
+    if let Some(classes) = classes.filter(|_| !drop.is_empty()) {
+        let lowest = (regions.regions.iter()).fold(f64::INFINITY, |z, r| z.min(r.mean[2]));
+        let ground = ground_points(points, classes, lowest);
+        for (r, d) in drop.iter_mut().enumerate() {
+            *d = street_level(regions, polygons, r, points, classes, &ground);
+        }
+    }
     let platforms: Vec<bool> = (0..regions.regions.len())
         .map(|r| !drop[r] && is_raised_platform(regions, polygons, r, &drop))
         .collect();
@@ -150,19 +143,20 @@ pub fn is_street_level(
     classes: &[u8],
 ) -> bool {
     let ground = ground_points(points, classes, regions.regions[r].mean[2]);
-    street_level(regions, polygons, r, points, classes, || &ground)
+    street_level(regions, polygons, r, points, classes, &ground)
 }
 
-/// [`is_street_level`], with the points classed ground asked for once they are needed.
-fn street_level<'g>(
+/// [`is_street_level`], given the points classed ground ([`ground_points`]) at or above a height
+/// no higher than region `r`'s.
+fn street_level(
     regions: &Regions,
     polygons: &[Polygon],
     r: usize,
     points: &[[f64; 3]],
     classes: &[u8],
-    ground: impl FnOnce() -> &'g [[f64; 3]],
+    ground: &[[f64; 3]],
 ) -> bool {
-    may_be_street(regions.regions[r].mean, ground())
+    may_be_street(regions.regions[r].mean, ground)
         && street_by_level(regions, polygons, r, points, classes)
 }
 

@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     results = []
     resize = tuple(int(v) for v in args.size.split("x")) if args.size else None
     images, labels = load_split(args.test, limit=args.limit, size=resize)
-    w, h = images.shape[2], images.shape[1]
+    h, w = (int(v) for v in images.shape[1:3])
     sizes = [tuple(int(v) for v in s.split("x")) for s in (args.latency_size or ["320x240"])]
     for spec in args.model:
         name, path = spec.split("=", 1)
@@ -130,7 +130,7 @@ def main(argv=None) -> int:
         meta = sess.get_modelmeta().custom_metadata_map
         t = time.time()
         conf = confusion(sess, images, labels)
-        res = {"name": name, "path": path, "input_size": [int(w), int(h)], "test_images": int(images.shape[0]),
+        res = {"name": name, "path": path, "input_size": [w, h], "test_images": int(images.shape[0]),
                "iou": iou_from_confusion(conf), "size_kb": Path(path).stat().st_size / 1024,
                "training": json.loads(meta.get("training", "{}")), "latency": {}}
         all_sizes = sizes + ([(w, h)] if (w, h) not in sizes else [])
