@@ -194,9 +194,9 @@ impl SqliteStore {
     fn with_connection(mut conn: Connection) -> Result<Self> {
         conn.busy_timeout(BUSY_TIMEOUT).map_err(db)?;
         // In memory the journal stays "memory"; on disk it becomes "wal".
-        let _mode: String = conn
-            .query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0))
-            .map_err(db)?;
+        let _mode: String =
+            while_busy(|| conn.query_row("PRAGMA journal_mode = WAL", [], |r| r.get(0)))
+                .map_err(db)?;
         // Searches read the R*Tree's pages at random: map the file (no read call per page) and
         // keep more of it cached than SQLite's 2 MB default.
         conn.execute_batch(&format!(
@@ -890,6 +890,25 @@ fn kind_code(kind: SiteKind) -> i64 {
     match kind {
         SiteKind::Confirmed => 0,
         SiteKind::Candidate => 1,
+    }
+}
+
+/// `op`, tried again while SQLite answers "database is locked" at once, for at most
+/// [`BUSY_TIMEOUT`]. The busy timeout waits out another connection's lock, but not a lock it could
+/// deadlock on: connections making a new file a WAL file at the same moment (a server starting
+/// while the command line imports into its file) get that answer without waiting.
+fn while_busy<T>(mut op: impl FnMut() -> rusqlite::Result<T>) -> rusqlite::Result<T> {
+    let give_up = std::time::Instant::now() + BUSY_TIMEOUT;
+    loop {
+        match op() {
+            Err(e)
+                if e.sqlite_error_code() == Some(rusqlite::ErrorCode::DatabaseBusy)
+                    && std::time::Instant::now() < give_up =>
+            {
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            done => return done,
+        }
     }
 }
 

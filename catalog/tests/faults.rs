@@ -70,6 +70,36 @@ impl Drop for KillOnDrop {
 /// the integrity check (SQLite's and the R*Tree's), and holds every batch the writer reported
 /// committed and at most the one in flight, whole (a transaction is all or nothing): at most one
 /// batch ([`BATCH`] observations) is lost.
+/// Several processes opening one new catalog file at once (a server starting while the command
+/// line imports into the same file) all open it: the first to make it a WAL file holds a lock
+/// the others' busy timeout cannot wait out (SQLite answers "database is locked" at once rather
+/// than deadlock), so opening waits and tries again.
+#[test]
+fn sqlite_opened_by_many_at_once_opens_for_all() {
+    let dir = tempfile::tempdir().unwrap();
+    for round in 0..40 {
+        let path = dir.path().join(format!("race-{round}.sqlite"));
+        let start = Arc::new(std::sync::Barrier::new(4));
+        let opened: Vec<Result<SqliteStore, Error>> = std::thread::scope(|threads| {
+            let openers: Vec<_> = (0..4)
+                .map(|_| {
+                    let (start, path) = (start.clone(), &path);
+                    threads.spawn(move || {
+                        start.wait();
+                        SqliteStore::open(path)
+                    })
+                })
+                .collect();
+            openers.into_iter().map(|o| o.join().unwrap()).collect()
+        });
+        for o in opened {
+            if let Err(e) = o {
+                panic!("round {round}: {e}");
+            }
+        }
+    }
+}
+
 #[test]
 fn sqlite_killed_mid_write_loses_at_most_the_batch_in_flight() {
     if let Ok(path) = std::env::var(WRITER_ENV) {
