@@ -7,6 +7,12 @@
 # and a seeded smoke run of every cargo-fuzz target (RELIABILITY.md).
 # Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
 # models/training/smoke.sh, deploy in deploy/check.sh.
+#
+# Disk: kept build outputs add up to about 15 GB (PyTorch's venv 5.6, the test build 3.5-4.5, the
+# release build and the fuzz targets about 2 each). With LANDING_TEST_PRUNE=1 (.ci/run sets it: a
+# clean clone that is thrown away) each step's outputs are removed once no later step needs them,
+# so the suite needs only its largest step, PyTorch's install (about 8 GB while its wheels unpack),
+# which therefore runs first.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -15,8 +21,18 @@ cd "$root"
 bash scripts/setup.sh
 export ORT_DYLIB_PATH="$root/.ort/libonnxruntime.so"
 
-# Each step's header says how much disk is left: the suite's builds and venvs take about 15 GB.
+# Each step's header says how much disk is left.
 step() { printf '\n=== %s  (%s free)\n' "$*" "$(df -h --output=avail . | tail -1 | tr -d ' ')"; }
+prune() {
+  if [ "${LANDING_TEST_PRUNE:-0}" = 1 ]; then
+    echo "prune: $*"
+    "$@"
+  fi
+}
+
+step "segmentation: smoke train, export, parity with PyTorch, shipped model signature"
+bash models/training/smoke.sh
+prune rm -rf .venvs/train
 
 step "format and lints"
 cargo fmt --all -- --check
@@ -33,6 +49,7 @@ fi
 step "Rust tests (unit, property, doc, end-to-end)"
 bash scripts/setup-postgres.sh  # the catalog's conformance suite starts a PostgreSQL + PostGIS
 cargo test --workspace --locked
+prune cargo clean --profile dev  # the test build: every later step runs the release binaries
 
 step "release binaries"
 cargo build --release --locked -p landing-server -p landing-cli -p landing-sim --bins
@@ -51,9 +68,6 @@ trap cleanup EXIT
 "$py" sim/tests/python/check_mcap.py "$tmp/check.mcap"
 "$py" sim/tests/python/check_mcap.py samples/rooftops.mcap
 
-step "segmentation: smoke train, export, parity with PyTorch, shipped model signature"
-bash models/training/smoke.sh
-
 step "a client that is not ours (Python grpcio) and the evaluation slice, against a real server"
 "$bin/landing-server" serve --listen 127.0.0.1:50051 --metrics-listen "" &
 server_pid=$!
@@ -71,6 +85,7 @@ kill -TERM "$server_pid"; wait "$server_pid"; server_pid=""
 
 step "deployment: manifests, container recipes, shipped config, serving the sample with it"
 LANDING_BIN_DIR="$bin" bash deploy/check.sh
+prune cargo clean --release  # the fuzz targets build in their own directory
 
 step "fuzz smoke: every cargo-fuzz target, 20 000 runs from its seed corpus, seeded (RELIABILITY.md)"
 command -v cargo-fuzz >/dev/null || cargo install --locked cargo-fuzz@0.13.2
