@@ -8,11 +8,11 @@
 # Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
 # models/training/smoke.sh, deploy in deploy/check.sh.
 #
-# Disk: kept build outputs add up to about 15 GB (PyTorch's venv 5.6, the test build 3.5-4.5, the
-# release build and the fuzz targets about 2 each). With LANDING_TEST_PRUNE=1 (.ci/run sets it: a
-# clean clone that is thrown away) each step's outputs are removed once no later step needs them,
-# so the suite needs only its largest step, PyTorch's install (about 8 GB while its wheels unpack),
-# which therefore runs first.
+# Disk: kept build outputs add up to about 14 GB (PyTorch's venv 5.6 GB, the test build 3.9, the
+# release build 1.8, the fuzz targets 2.0). With LANDING_TEST_PRUNE=1 (.ci/run sets it: a clean
+# clone that is thrown away) each step's outputs are removed once no later step needs them, so the
+# suite needs only its largest step, PyTorch's install (8.5 GB at its peak, its wheels beside what
+# they unpack), which therefore runs first; every later step stays under 4.5 GB.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
