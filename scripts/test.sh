@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
-# The whole test suite: format, lints, the Rust tests (unit, property, doc, end-to-end over loopback
-# gRPC with the real model and real recordings), then the cross-language and deployment checks:
-# the Python MCAP reader, the segmentation smoke train + ONNX parity check, a Python grpcio client
-# and the stock Python reflection client,
-# the evaluation slice, single-frame and fused (fails on any unsafe site), the deploy manifests/config/serve check,
-# and a seeded smoke run of every cargo-fuzz target (RELIABILITY.md).
+# The whole test suite: the segmentation smoke train + ONNX parity check (first: see "Disk"), format,
+# lints, the Rust tests (unit, property, doc, end-to-end over loopback gRPC with the real model and
+# real recordings), then the cross-language and deployment checks: the Python MCAP reader, a Python
+# grpcio client and the stock Python reflection client, the evaluation slice, single-frame and fused
+# (fails on any unsafe site), the deploy manifests/config/serve check, and a seeded smoke run of
+# every cargo-fuzz target (RELIABILITY.md).
 # Each Python step uses its own venv under .venvs/ (scripts/python-env.sh): checks here, train in
 # models/training/smoke.sh, deploy in deploy/check.sh.
 #
