@@ -40,7 +40,7 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::BinaryHeap;
 use std::path::Path;
 use std::sync::{LazyLock, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use rusqlite::{
     Connection, OptionalExtension, Row, Rows, Transaction, TransactionBehavior, params,
@@ -898,12 +898,12 @@ fn kind_code(kind: SiteKind) -> i64 {
 /// deadlock on: connections making a new file a WAL file at the same moment (a server starting
 /// while the command line imports into its file) get that answer without waiting.
 fn while_busy<T>(mut op: impl FnMut() -> rusqlite::Result<T>) -> rusqlite::Result<T> {
-    let give_up = std::time::Instant::now() + BUSY_TIMEOUT;
+    let give_up = Instant::now() + BUSY_TIMEOUT;
     loop {
         match op() {
             Err(e)
                 if e.sqlite_error_code() == Some(rusqlite::ErrorCode::DatabaseBusy)
-                    && std::time::Instant::now() < give_up =>
+                    && Instant::now() < give_up =>
             {
                 std::thread::sleep(Duration::from_millis(5));
             }

@@ -279,6 +279,13 @@ mod tests {
         }
     }
 
+    /// [`grid`] over `rect`, its jittered points that fall outside `rect` left out.
+    fn block(rect: [f64; 4], z: f64, class: u8, out: &mut (Vec<[f32; 3]>, Vec<u8>)) {
+        let [x0, y0, x1, y1] = rect;
+        let outside = |x: f64, y: f64| !((x0..=x1).contains(&x) && (y0..=y1).contains(&y));
+        grid(rect, z, class, outside, out);
+    }
+
     /// The sites' (plane height, safe radius).
     fn sites(cloud: &(Vec<[f32; 3]>, Vec<u8>)) -> Vec<(f64, f64)> {
         let found = detect(&Cloud::new(&cloud.0, Some(&cloud.1)), &Params::default()).unwrap();
@@ -346,27 +353,14 @@ mod tests {
         let mut cloud = (Vec::new(), Vec::new());
         grid([0.0, 0.0, 14.0, 14.0], 20.0, ROOF, |_, _| false, &mut cloud);
         let patch = |x: f64, y: f64| (20.0..=26.0).contains(&x) && (4.0..=10.0).contains(&y);
-        let low = |x: f64, y: f64| (20.0..=26.0).contains(&x) && (-12.0..=-6.0).contains(&y);
         let taken = |x: f64, y: f64| {
             ((-0.5..=14.5).contains(&x) && (-0.5..=14.5).contains(&y))
                 || patch(x, y)
                 || (19.5..=26.5).contains(&x) && (-12.5..=-5.5).contains(&y)
         };
         grid([-10.0, -20.0, 40.0, 30.0], 0.0, GROUND, taken, &mut cloud);
-        grid(
-            [20.0, 4.0, 26.0, 10.0],
-            0.0,
-            ROOF,
-            |x, y| !patch(x, y),
-            &mut cloud,
-        );
-        grid(
-            [20.0, -12.0, 26.0, -6.0],
-            3.0,
-            ROOF,
-            |x, y| !low(x, y),
-            &mut cloud,
-        );
+        block([20.0, 4.0, 26.0, 10.0], 0.0, ROOF, &mut cloud);
+        block([20.0, -12.0, 26.0, -6.0], 3.0, ROOF, &mut cloud);
         let found = sites(&cloud);
         assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         assert!(found.iter().any(|s| (s.0 - 3.0).abs() < 0.1), "{found:?}");
@@ -387,35 +381,15 @@ mod tests {
         // with nothing called roof on it but the patch.
         let mut cloud = (Vec::new(), Vec::new());
         let patch = |x: f64, y: f64| (12.0..=28.0).contains(&x) && (4.0..=16.0).contains(&y);
-        let roof_w = |x: f64, y: f64| (2.0..=8.0).contains(&x) && (7.0..=13.0).contains(&y);
-        let roof_e = |x: f64, y: f64| (32.0..=38.0).contains(&x) && (7.0..=13.0).contains(&y);
         let taken = |x: f64, y: f64| {
             patch(x, y)
                 || (1.5..=8.5).contains(&x) && (6.5..=13.5).contains(&y)
                 || (31.5..=38.5).contains(&x) && (6.5..=13.5).contains(&y)
         };
         grid([-10.0, -15.0, 50.0, 35.0], 0.0, GROUND, taken, &mut cloud);
-        grid(
-            [12.0, 4.0, 28.0, 16.0],
-            0.0,
-            ROOF,
-            |x, y| !patch(x, y),
-            &mut cloud,
-        );
-        grid(
-            [2.0, 7.0, 8.0, 13.0],
-            20.0,
-            ROOF,
-            |x, y| !roof_w(x, y),
-            &mut cloud,
-        );
-        grid(
-            [32.0, 7.0, 38.0, 13.0],
-            20.0,
-            ROOF,
-            |x, y| !roof_e(x, y),
-            &mut cloud,
-        );
+        block([12.0, 4.0, 28.0, 16.0], 0.0, ROOF, &mut cloud);
+        block([2.0, 7.0, 8.0, 13.0], 20.0, ROOF, &mut cloud);
+        block([32.0, 7.0, 38.0, 13.0], 20.0, ROOF, &mut cloud);
         let found = sites(&cloud);
         assert!(found.iter().all(|s| s.0 > 1.0), "{found:?}");
         assert_eq!(
