@@ -162,8 +162,9 @@ pub struct SegmenterConfig {
     pub model_path: PathBuf,
     /// CPU (default) or CUDA.
     pub execution_provider: ExecutionProvider,
-    /// Threads ONNX Runtime uses inside one inference (1..=64). Default 1: a server gets its
-    /// parallelism from several frames at once.
+    /// Threads ONNX Runtime uses inside one inference (1..=64); more than one spin between
+    /// operators. Default 1: a server gets its parallelism from several frames at once, and
+    /// sessions whose threads together outnumber the cores run slower than one thread each.
     pub intra_threads: usize,
     /// The ONNX Runtime library. `None`: `ORT_DYLIB_PATH`, else `.ort/libonnxruntime.so` in the
     /// working directory or the workspace root (filled by `scripts/setup-ort.sh`).
@@ -528,9 +529,11 @@ fn base_builder(
         .map_err(|e| PerceptionError::runtime(stage, e))?
         .with_inter_threads(1)
         .map_err(|e| PerceptionError::runtime(stage, e))?
-        // Spinning threads steal the CPU from everything else on a busy machine and make
-        // two threads slower than one.
-        .with_intra_op_spinning(false)
+        // A pool's threads spin between the model's operators: without it a second thread
+        // sleeps through most of them and gains nothing (320×240 one frame at a time: 8.6 ms
+        // on one thread, 8.6 ms on two without spinning, 4.7 ms with it; BENCHMARKS.md). Spinning
+        // pools that outnumber the cores steal them from each other (`intra_threads`).
+        .with_intra_op_spinning(config.intra_threads > 1)
         .map_err(|e| PerceptionError::runtime(stage, e))?
         .with_inter_op_spinning(false)
         .map_err(|e| PerceptionError::runtime(stage, e))?

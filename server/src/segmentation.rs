@@ -84,6 +84,17 @@ impl Segmenter {
                 "segmentation.execution_provider = \"cuda\" is unavailable; running on the CPU"
             );
         }
+        let threads = config.sessions.max(1) * config.intra_threads;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if config.intra_threads > 1 && threads as usize > cores {
+            tracing::warn!(
+                sessions = config.sessions,
+                intra_threads = config.intra_threads,
+                cores,
+                "segmentation.sessions × segmentation.intra_threads outnumber the cores: the \
+                 sessions' spinning threads will slow each other down"
+            );
+        }
         // No sizes: the model's own.
         let sizes = if sizes.is_empty() {
             let i = sessions[0].info();
