@@ -45,8 +45,10 @@ const MAX_SWEEP_DISKS: usize = 64;
 const TILE: usize = 8;
 
 /// A newer frame replaces an older one's view of a place only from at most this fraction of the
-/// older one's range to it (see [`ObstacleRays::newest_view_on_plane`]).
-pub const NEARER_VIEW: f64 = 0.8;
+/// older one's range to it (see [`ObstacleRays::newest_view_on_plane`]). It was 0.8 until an air
+/// vent the model saw from 50 m and called roof from 45 m on was forgotten at 39 m, where a
+/// circle reached it (fresh set 6278; 0.6 changed no answer on six fresh fused sets, EVALUATION.md).
+pub const NEARER_VIEW: f64 = 0.6;
 
 /// The rays of a mask's obstacle pixels, in the world frame.
 #[derive(Debug, Clone)]
@@ -638,9 +640,11 @@ mod tests {
             |_| false,
         );
         let clear = ClassMask::new(100, 80, vec![4u8; 100 * 80]).unwrap();
-        // From 15 m above the same place the roof is clear; from 30 m east it is out of view.
-        let near = ObstacleRays::new(&nadir_camera_at(15.0), &clear, &[], |c| c != 4, |_| false);
-        let mut elsewhere = nadir_camera_at(15.0);
+        // From 12 m above the same place (about half the range) the roof is clear; from 30 m
+        // east it is out of view; from 15 m (two thirds of the range) it is not much nearer.
+        let near = ObstacleRays::new(&nadir_camera_at(12.0), &clear, &[], |c| c != 4, |_| false);
+        let nearish = ObstacleRays::new(&nadir_camera_at(15.0), &clear, &[], |c| c != 4, |_| false);
+        let mut elsewhere = nadir_camera_at(12.0);
         elsewhere.pose.translation.vector.x = 30.0;
         let elsewhere = ObstacleRays::new(&elsewhere, &clear, &[], |c| c != 4, |_| false);
 
@@ -649,6 +653,7 @@ mod tests {
         assert_eq!(cast(&[&far]), alone);
         // A newer view of the same place replaces it; a newer view elsewhere does not.
         assert!(cast(&[&far, &near]).is_empty());
+        assert_eq!(cast(&[&far, &nearish]), alone);
         assert_eq!(cast(&[&far, &elsewhere]), alone);
         // Order is time: the far frame as the newest keeps its block.
         assert_eq!(cast(&[&near, &far]), alone);
@@ -657,8 +662,9 @@ mod tests {
         beside.pose.translation.vector.x = 0.5;
         let beside = ObstacleRays::new(&beside, &clear, &[], |c| c != 4, |_| false);
         assert_eq!(cast(&[&far, &beside]), alone);
-        let under = Point3::new(1.65, 2.85, 5.0);
-        assert!(near.sees(&under) && !elsewhere.sees(&under));
+        // Where the obstacle stands (its ray 1.2 m above the roof), which the near camera sees.
+        let under = Point3::new(1.5, 2.6, 5.0);
+        assert!(near.sees(&under) && nearish.sees(&under) && !elsewhere.sees(&under));
     }
 
     #[test]

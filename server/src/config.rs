@@ -386,7 +386,7 @@ pub struct SegmentationConfig {
     /// "cpu" or "cuda" (falls back to CPU with a warning).
     pub execution_provider: ExecutionProvider,
     /// ONNX Runtime threads inside one inference (default 1). More than one spin between the
-    /// model's operators: with `sessions = 1` a frame at a time takes half the time, but
+    /// model's operators: with `sessions = 1` a frame at a time takes about half the time, but
     /// sessions × threads beyond the cores slow every frame (BENCHMARKS.md, "Single frames").
     pub intra_threads: u32,
     /// ONNX Runtime sessions, used in turn: this many frames are segmented at once, and a
