@@ -15,7 +15,8 @@ root=$(cd "$here/../../.." && pwd)
 set_dir=$(cd "$1" && pwd)
 rounds=${2:-3}
 out=${3:-$root/target/python-pipeline}
-bin="$root/target/release"
+. "$root/scripts/lib.sh"
+bin=$(cd "$root" && release_bin_dir)  # honours CARGO_TARGET_DIR
 export ORT_DYLIB_PATH=${ORT_DYLIB_PATH:-$root/.ort/libonnxruntime.so}
 py=$(bash "$here/setup.sh")
 mkdir -p "$out"
