@@ -16,7 +16,6 @@ Usage: pipeline.py MODEL.onnx RECORDING.mcap... [--rounds N] [--threads N] [--js
 """
 
 import argparse
-import faulthandler
 import io
 import json
 import statistics
@@ -128,10 +127,11 @@ def run_frame(frame, session, input_name):
     if len(roof) < 3:
         return []
     origin = roof.mean(axis=0)
+    # MatrixDouble wraps the array's memory without copying: it must outlive the extraction.
+    vertices = roof - origin
     polylidar = Polylidar3D(lmax=LMAX, min_triangles=MIN_TRIANGLES, z_thresh=Z_THRESH,
                             norm_thresh=NORM_THRESH, norm_thresh_min=NORM_THRESH)
-    _, _, polygons = polylidar.extract_planes_and_polygons(MatrixDouble(roof - origin))
-    vertices = roof - origin
+    _, _, polygons = polylidar.extract_planes_and_polygons(MatrixDouble(vertices))
     sites = []
     for polygon in polygons:
         ring = vertices[np.asarray(polygon.shell)]
@@ -155,8 +155,6 @@ def main():
     ap.add_argument("recordings", nargs="+")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--threads", type=int, default=0, help="ONNX Runtime intra-op threads (0: its default)")
-    ap.add_argument("--frame-timeout", type=float, default=10.0,
-                    help="seconds after which a frame is taken to hang: print where, exit 1")
     ap.add_argument("--json")
     args = ap.parse_args()
 
@@ -171,13 +169,9 @@ def main():
     found = []
     for _ in range(args.rounds):
         for frame in frames:
-            # Polylidar3D's Delaunay triangulation once looped forever on a frame here (once in
-            # about 2,000 frames): stop with a traceback instead of waiting.
-            faulthandler.dump_traceback_later(args.frame_timeout, exit=True)
             start = time.perf_counter()
             sites = run_frame(frame, session, input_name)
             times.append((time.perf_counter() - start) * 1e3)
-            faulthandler.cancel_dump_traceback_later()
             found.append(sites)
     times_sorted = sorted(times)
     p50 = statistics.median(times)

@@ -2,7 +2,6 @@
 // a scheduled task runs at once on the calling thread. Only Polylidar3D's mesh paths schedule
 // tasks; the point-cloud path it is timed on never does.
 #pragma once
-#include <cmath>
 #include <functional>
 #include <memory>
 #include <mutex>
