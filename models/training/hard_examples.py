@@ -18,12 +18,14 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-ROOFTOP = 4
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from safety import ROOFTOP  # noqa: E402
 
 
 def main() -> None:

@@ -36,9 +36,9 @@ from PIL import Image
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from evaluate import iou_from_confusion, session  # noqa: E402
+from safety import ROOFTOP  # noqa: E402
 from seg.models import NUM_CLASSES  # noqa: E402
 
-ROOFTOP = 4
 OBSTACLES = range(5, 14)  # entrance … tarp
 NAMES = {5: "entrance", 6: "skylight", 7: "vents", 8: "ac-unit", 9: "seating", 10: "ducts",
          11: "water tower", 12: "chimney", 13: "tarp"}
